@@ -1,0 +1,133 @@
+"""The ``ddtrack`` command (DESIGN 4). Exit codes: 0 success, 1 a run diverged, 2 usage or configuration error.
+
+User mistakes print one or two plain lines on stderr, never a traceback.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import click
+
+from .errors import ConfigError, RunError
+
+LISTS = ("controllers", "trajectories", "disturbances")
+
+
+def _enable_compilation_cache() -> None:
+    """JAX's persistent cache makes the second ``ddtrack run`` skip most of the compile."""
+    import jax
+
+    root = os.environ.get("DDTRACK_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
+    try:
+        cache = Path(root) / "jax"
+        cache.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return  # a read-only home only costs compile time
+    jax.config.update("jax_compilation_cache_dir", str(cache))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="ddtrack")
+def cli() -> None:
+    """Simulate, compare and tune trajectory-tracking controllers for differential-drive robots."""
+
+
+@cli.command()
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option("--controller", "controller", metavar="NAME", help="Replace controller.kind (see `ddtrack list`).")
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
+              help="Override a scenario value, e.g. --set robot.mass=12 (repeatable).")
+@click.option("--seed", type=click.IntRange(min=0), help="Replace simulation.seed.")
+@click.option("--out", type=click.Path(path_type=Path), help="Run folder [default: runs/NAME].")
+def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed: int | None, out: Path | None) -> int:
+    """Simulate SCENARIO once and write a run folder."""
+    from .scenario import load_scenario
+
+    spec = load_scenario(scenario, overrides=overrides, seed=seed, controller=controller)
+    folder = out if out is not None else Path("runs") / spec.name
+    from .rundir import check_writable
+
+    check_writable(folder)  # before spending time on the simulation
+    _enable_compilation_cache()
+    from .metrics import summarize
+    from .rundir import write_run
+    from .runner import run as run_scenario
+    from .sim import REMEDIES, timeseries
+
+    result = run_scenario(spec)
+    columns = timeseries(result)
+    sim = spec.simulation
+    metrics = summarize(columns, status=result.status_name, window=sim.window, control_period=sim.control_period,
+                        settling_threshold=sim.settling_threshold, failure_time=result.failure_time)
+    write_run(folder, spec, columns, metrics)
+    click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
+               f"{sim.duration:g} s -> {folder}")
+    if result.status_name != "ok":
+        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {REMEDIES[result.status_name]}",
+                   err=True)
+        return 1
+    window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
+    settle = metrics["settling_time"]
+    click.echo(f"  e_tr over {window}: mean {metrics['e_tr_mean']:.4f} m, rms {metrics['e_tr_rms']:.4f} m, "
+               f"max {metrics['e_tr_max']:.4f} m, final {metrics['e_tr_final']:.4f} m")
+    click.echo(f"  settling (e_tr < {sim.settling_threshold:g} m): "
+               f"{'never' if settle is None else f'{settle:.2f} s'}; effort {metrics['effort']:.1f} N^2 m^2 s; "
+               f"saturated {100 * metrics['saturation_fraction']:.1f} % of the time")
+    return 0
+
+
+@cli.command()
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a value first.")
+def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
+    """Check SCENARIO without running it."""
+    from .scenario import load_scenario
+
+    spec = load_scenario(scenario, overrides=overrides)
+    click.echo(f"ok: {spec.name} ({spec.trajectory.kind}, {spec.controller.kind}, "
+               f"{spec.simulation.n_steps} control periods)")
+    return 0
+
+
+@cli.command(name="list")
+@click.argument("what", required=False, type=click.Choice(LISTS))
+def list_(what: str | None) -> int:
+    """List the controllers, trajectories and disturbances a scenario can name."""
+    from .scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, summary
+
+    registries = {"controllers": CONTROLLERS, "trajectories": TRAJECTORIES, "disturbances": DISTURBANCES}
+    for name in [what] if what else LISTS:
+        click.echo(f"{name}:")
+        for kind, model in registries[name].items():
+            click.echo(f"  {kind:<16} {summary(model)}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
+    try:
+        code = cli.main(args=list(argv) if argv is not None else None, prog_name="ddtrack", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        return 130
+    except ConfigError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    except RunError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    return code if isinstance(code, int) else 0
+
+
+def entry_point() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""Kanayama backstepping: the kinematic law (paper eq. 12), its analytic derivative (SPEC 2.5) and
+the Lyapunov function (eq. 13)."""
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass, static_field
+from ..geometry import error_rates, posture_error
+from ..trajectories import Reference
+from .base import Logs, VelocityCommand
+
+
+def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
+    """nu_c = [v_r cos e_th + Kx e_x, omega_r + v_r (Ky e_y + Kth sin e_th)] (paper eq. 12, SPEC 2.4).
+
+    ``error`` = [e_x, e_y, e_theta] (SPEC 2.2); ``gains`` = [Kx, Ky, Ktheta] > 0.
+    """
+    e_x, e_y, e_th = error[0], error[1], error[2]
+    kx, ky, kth = gains[0], gains[1], gains[2]
+    return jnp.stack([ref.v * jnp.cos(e_th) + kx * e_x, ref.omega + ref.v * (ky * e_y + kth * jnp.sin(e_th))])
+
+
+def kanayama_command_rate(error: Array, nu: Array, ref: Reference, gains: Array) -> Array:
+    """Analytic d nu_c / dt with the gains held and the measured nu in the error dynamics (SPEC 2.5)."""
+    e_x, e_y, e_th = error[0], error[1], error[2]
+    kx, ky, kth = gains[0], gains[1], gains[2]
+    de_x, de_y, de_th = error_rates(error, nu[0], nu[1], ref.v, ref.omega)
+    v_dot = ref.v_dot * jnp.cos(e_th) - ref.v * jnp.sin(e_th) * de_th + kx * de_x
+    omega_dot = (ref.omega_dot + ref.v_dot * (ky * e_y + kth * jnp.sin(e_th))
+                 + ref.v * (ky * de_y + kth * jnp.cos(e_th) * de_th))
+    return jnp.stack([v_dot, omega_dot])
+
+
+def lyapunov(error: Array, ky: Array) -> Array:
+    """V_L = (e_x^2 + e_y^2)/2 + (1 - cos e_th)/Ky (paper eq. 13)."""
+    return 0.5 * (error[0] ** 2 + error[1] ** 2) + (1.0 - jnp.cos(error[2])) / ky
+
+
+def clamp_command(nu_c: Array, nu_c_dot: Array, limits: Array) -> tuple[Array, Array, Array]:
+    """Clamp |v_c| <= limits[0], |omega_c| <= limits[1]; a clamped channel's derivative becomes 0 (SPEC 2.5).
+
+    Returns the clamped command, its derivative and 1.0 if any channel was clamped (else 0.0).
+    """
+    clamped = jnp.abs(nu_c) > limits
+    return (jnp.clip(nu_c, -limits, limits), jnp.where(clamped, 0.0, nu_c_dot),
+            jnp.any(clamped).astype(nu_c.dtype))
+
+
+@pytree_dataclass
+class Backstepping:
+    """Kanayama backstepping velocity law (paper eq. 12; SPEC 2.4, 2.5).
+
+    In: measured state y = [x, y, theta, v, omega] and the reference. Out: nu_c = (v_c [m/s],
+    omega_c [rad/s]) clamped to ``max_velocity`` and ``max_yaw_rate``, with its analytic derivative.
+    As a whole controller (``step``) it drives a kinematic plant; over a dynamic plant compose it
+    with an inner loop in a :class:`~ddtrack.controllers.Cascade`. ``strict`` adds the cross term
+    [e_x, sin(e_th)/Ky] to the inner loop's u (SPEC 2.4, not in the paper). Logs the gains.
+    """
+
+    kx: float = 1.0
+    ky: float = 55.0
+    ktheta: float = 15.0
+    max_velocity: float = 2.0
+    max_yaw_rate: float = 4.0
+    strict: bool = static_field(default=False)
+
+    @property
+    def gains(self) -> Array:
+        return jnp.stack([jnp.asarray(self.kx, float), jnp.asarray(self.ky, float), jnp.asarray(self.ktheta, float)])
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
+        return ()
+
+    def command(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[VelocityCommand, tuple[()], Logs]:
+        gains = self.gains
+        error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+        nu_c = kanayama_command(error, ref, gains)
+        nu_c_dot = kanayama_command_rate(error, y[3:5], ref, gains)
+        limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
+        nu_c, nu_c_dot, saturated = clamp_command(nu_c, nu_c_dot, limits)
+        feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if self.strict else jnp.zeros(2)
+        logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2]}
+        return VelocityCommand(nu_c, nu_c_dot, feedback, saturated), memory, logs
+
+    def step(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[Array, tuple[()], Logs]:
+        command, memory, logs = self.command(t, y, ref, memory)
+        return command.nu_c, memory, {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1],
+                                      "saturated": command.saturated, **logs}

@@ -1,0 +1,76 @@
+"""The controller protocol and the cascade of an outer velocity law over an inner torque law.
+
+One calling convention for every controller (DESIGN 3)::
+
+    memory = controller.init(x0, ref0, key)
+    u, memory, logs = controller.step(t, y, ref, memory)
+
+``y`` is the measured state [x, y, theta, v, omega]; ``u`` is what the plant takes (wheel torques
+[N m], or (v, omega) for a kinematic plant); ``logs`` is a flat dict of float64 scalars that is
+recorded and never fed back. Everything that evolves lives in ``memory``.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Protocol
+
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass
+from ..trajectories import Reference
+
+Logs = dict[str, Array]
+
+
+class Controller(Protocol):
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+
+    def step(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[Array, Any, Logs]: ...
+
+
+class VelocityCommand(NamedTuple):
+    """What an outer law hands the inner loop."""
+
+    nu_c: Array  #: commanded (v_c [m/s], omega_c [rad/s])
+    nu_c_dot: Array  #: its time derivative (analytic, SPEC 2.5)
+    feedback: Array  #: extra term added to u of eq. 11 (strict backstepping cross term; zero otherwise)
+    saturated: Array  #: 1.0 when a velocity clamp was active, else 0.0
+
+
+class VelocityLaw(Protocol):
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+
+    def command(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[VelocityCommand, Any, Logs]: ...
+
+
+class TorqueLaw(Protocol):
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+
+    def torque(self, y: Array, command: VelocityCommand, memory: Any) -> tuple[Array, Array, Any]: ...
+
+
+@pytree_dataclass
+class Cascade:
+    """An outer velocity law over an inner torque law, so baselines share inner loops (DESIGN 3).
+
+    Logs: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s], ``saturated`` (1.0 when a velocity clamp or the
+    torque limit was active), plus the outer law's logs.
+    """
+
+    outer: Any
+    inner: Any
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[Any, Any]:
+        return self.outer.init(x0, ref0, key), self.inner.init(x0, ref0, key)
+
+    def step(self, t: Array, y: Array, ref: Reference, memory: tuple[Any, Any]) -> tuple[Array, Any, Logs]:
+        outer_memory, inner_memory = memory
+        command, outer_memory, outer_logs = self.outer.command(t, y, ref, outer_memory)
+        tau, torque_saturated, inner_memory = self.inner.torque(y, command, inner_memory)
+        logs = {
+            "v_cmd": command.nu_c[0],
+            "omega_cmd": command.nu_c[1],
+            "saturated": jnp.maximum(command.saturated, torque_saturated),
+            **outer_logs,
+        }
+        return tau, (outer_memory, inner_memory), logs

@@ -1,0 +1,68 @@
+"""Inner (dynamic) loops: velocity command -> wheel torques (SPEC 2.5, 2.6).
+
+Both saturate at the nominal ``max_torque`` and report whether they did.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass
+from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
+from ..trajectories import Reference
+from .base import VelocityCommand
+
+
+def _saturate(tau: Array, limit: Array) -> tuple[Array, Array]:
+    return jnp.clip(tau, -limit, limit), jnp.any(jnp.abs(tau) > limit).astype(tau.dtype)
+
+
+@pytree_dataclass
+class ComputedTorque:
+    """Computed torque on the nominal model (paper eqs. 7, 11; SPEC 2.5).
+
+    u = nu_c_dot + K_c (nu_c - nu) [+ strict cross term];
+    tau = B_bar^-1 (M_hat u + V_hat(nu) nu) + tau_f_hat(W nu) [N m].
+    ``nominal`` is what the controller believes (its friction terms are the friction model, 0 by
+    default); ``kc`` = (k_cv, k_cw) [1/s]. With an exact model and no disturbance nu_dot = u (eq. 9).
+    """
+
+    nominal: RobotParams
+    kc: Array = (10.0, 10.0)
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
+        return ()
+
+    def torque(self, y: Array, command: VelocityCommand, memory: tuple[()]) -> tuple[Array, Array, tuple[()]]:
+        nu = y[3:5]
+        u = command.nu_c_dot + jnp.asarray(self.kc) * (command.nu_c - nu) + command.feedback
+        generalised = reduced_mass(self.nominal) @ u + reduced_coriolis(self.nominal, nu)
+        tau = reduced_input_inverse(self.nominal) @ generalised + wheel_friction(self.nominal, wheel_speeds(self.nominal, nu))
+        tau, saturated = _saturate(tau, self.nominal.max_torque)
+        return tau, saturated, memory
+
+
+@pytree_dataclass
+class WheelPD:
+    """Wheel-space PD, the consistent form of the paper's eq. 21 (SPEC 2.6).
+
+    tau = K_P (phi_dot_c - phi_dot) + K_D d/dt (phi_dot_c - phi_dot), phi_dot_c = W nu_c, with
+    d/dt phi_dot_c = W nu_c_dot analytic and d/dt phi_dot a backward difference over one control
+    period. ``kp`` [N m s/rad], ``kd`` [N m s^2/rad]; kp = 0.125 gives about k_v = 10, k_w = 10.7 1/s
+    on the default robot. Memory: the previous measured wheel speeds. Ignores the strict cross term.
+    """
+
+    nominal: RobotParams
+    kp: float = 0.125
+    kd: float = 0.0
+    control_period: float = 0.01
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Array:
+        return wheel_speeds(self.nominal, jnp.asarray(x0)[3:5])
+
+    def torque(self, y: Array, command: VelocityCommand, memory: Array) -> tuple[Array, Array, Array]:
+        phi_dot = wheel_speeds(self.nominal, y[3:5])
+        error = wheel_speeds(self.nominal, command.nu_c) - phi_dot
+        error_rate = wheel_speeds(self.nominal, command.nu_c_dot) - (phi_dot - memory) / self.control_period
+        tau, saturated = _saturate(self.kp * error + self.kd * error_rate, self.nominal.max_torque)
+        return tau, saturated, phi_dot

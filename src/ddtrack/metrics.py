@@ -1,0 +1,84 @@
+"""Metrics over finished runs (SPEC 4.4; paper eq. 35). Plain NumPy."""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+WINDOW_TOLERANCE = 1e-9  # [s] sample times are k * T_c in floating point
+
+
+def tracking_error(e_x: np.ndarray, e_y: np.ndarray) -> np.ndarray:
+    """e_tr = sqrt(e_x^2 + e_y^2) = |(x_r - x, y_r - y)| [m] (paper eq. 35)."""
+    return np.hypot(e_x, e_y)
+
+
+def window_mask(t: np.ndarray, window: tuple[float, float]) -> np.ndarray:
+    """Samples with start <= t <= end."""
+    start, end = window
+    return (t >= start - WINDOW_TOLERANCE) & (t <= end + WINDOW_TOLERANCE)
+
+
+def window_statistics(t: np.ndarray, e_tr: np.ndarray, window: tuple[float, float]) -> dict[str, float | None]:
+    """Mean, RMS, max and last value of e_tr over the samples in ``window`` [s]; None when it holds none."""
+    values = np.asarray(e_tr)[window_mask(np.asarray(t), window)]
+    if values.size == 0:
+        return {"e_tr_mean": None, "e_tr_rms": None, "e_tr_max": None, "e_tr_final": None}
+    return {
+        "e_tr_mean": float(np.mean(values)),
+        "e_tr_rms": float(np.sqrt(np.mean(values**2))),
+        "e_tr_max": float(np.max(values)),
+        "e_tr_final": float(values[-1]),
+    }
+
+
+def settling_time(t: np.ndarray, e_tr: np.ndarray, threshold: float) -> float | None:
+    """First sample time after which e_tr stays below ``threshold`` [m] to the end; None if never."""
+    above = np.flatnonzero(np.asarray(e_tr) >= threshold)
+    if above.size == 0:
+        return float(t[0])
+    last = int(above[-1])
+    return None if last + 1 >= len(t) else float(t[last + 1])
+
+
+def effort(tau_r: np.ndarray, tau_l: np.ndarray, control_period: float) -> float | None:
+    """Integral of tau_R^2 + tau_L^2 over the run [N^2 m^2 s] (exact under the zero-order hold)."""
+    total = float(np.sum(np.asarray(tau_r) ** 2 + np.asarray(tau_l) ** 2) * control_period)
+    return total if math.isfinite(total) else None
+
+
+def saturation_fraction(saturated: np.ndarray) -> float:
+    """Fraction of control periods in which a velocity clamp or the torque limit was active."""
+    return float(np.mean(np.asarray(saturated) > 0.5))
+
+
+def improvement(baseline: float, candidate: float) -> float:
+    """Percent reduction of the error from ``baseline`` to ``candidate``: 100 (E_BS - E_NN) / E_BS."""
+    if not baseline > 0.0:
+        raise ValueError(f"the baseline error must be > 0 to compare against it, got {baseline}")
+    return 100.0 * (baseline - candidate) / baseline
+
+
+def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
+              settling_threshold: float, failure_time: float | None = None) -> dict:
+    """The ``metrics.json`` dictionary of a run (DESIGN 4).
+
+    Error statistics are over ``window``; settling time, effort and saturation fraction over the
+    whole run. A failed run has every statistic None (JSON null) beside its status and failure time.
+    """
+    metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
+    keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
+    if status != "ok":
+        metrics |= dict.fromkeys(keys)
+        metrics["failure_time"] = failure_time
+    else:
+        t, e_tr = columns["t"], columns["e_tr"]
+        metrics |= window_statistics(t, e_tr, window)
+        metrics["settling_time"] = settling_time(t, e_tr, settling_threshold)
+        metrics["effort"] = effort(columns["tau_r"], columns["tau_l"], control_period)
+        metrics["saturation_fraction"] = saturation_fraction(columns["saturated"]) if "saturated" in columns else 0.0
+    if all(k in columns for k in ("kx", "ky", "ktheta")) and len(columns["t"]):
+        gains = [float(columns[k][-1]) for k in ("kx", "ky", "ktheta")]
+        metrics["final_gains"] = gains if all(map(math.isfinite, gains)) else None
+    return metrics

@@ -1,0 +1,52 @@
+"""Wheel-torque disturbances and pose-measurement noise (SPEC 1.2, 4.1).
+
+One disturbance form covers every kind the scenarios name (none, constant, sinusoid, gaussian):
+``tau_d(t_k) = bias + amplitude * sin(frequency * t_k + phase) + std * xi_k``, with ``xi_k`` standard
+normal draws made before the run from its seed and held over control period k.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass
+
+
+@pytree_dataclass
+class WheelDisturbance:
+    """Disturbance torques [tau_R, tau_L] [N m]; positive opposes the drive.
+
+    Attributes
+    ----------
+    bias : (2,) constant part [N m]
+    amplitude : (2,) sinusoid amplitude [N m]
+    frequency : sinusoid angular frequency [rad/s]
+    phase : (2,) sinusoid phase [rad]
+    std : (2,) standard deviation of the Gaussian part, held per control period [N m]
+    """
+
+    bias: Array = (0.0, 0.0)
+    amplitude: Array = (0.0, 0.0)
+    frequency: float = 0.0
+    phase: Array = (0.0, 0.0)
+    std: Array = (0.0, 0.0)
+
+    def torque(self, t: Array, xi: Array) -> Array:
+        """Disturbance at time ``t`` given the standard-normal draw ``xi`` (2,) of that period."""
+        bias, amp = jnp.asarray(self.bias), jnp.asarray(self.amplitude)
+        return bias + amp * jnp.sin(self.frequency * t + jnp.asarray(self.phase)) + jnp.asarray(self.std) * xi
+
+
+@pytree_dataclass
+class MeasurementNoise:
+    """Additive Gaussian noise on what the controller sees, y = X + std * xi.
+
+    Attributes
+    ----------
+    std : (5,) standard deviations of [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
+    """
+
+    std: Array = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def measure(self, x: Array, xi: Array) -> Array:
+        return x + jnp.asarray(self.std) * xi

@@ -1,0 +1,82 @@
+"""The run folder (DESIGN 4): ``scenario.toml``, ``timeseries.parquet``, ``metrics.json``, ``figures/``.
+
+Every file is written under a temporary name in the same folder and renamed into place, so the
+folder never holds a half-written file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import tomli_w
+
+from .errors import RunError
+from .plotting import plot_errors, plot_path, plot_states, plot_torques
+from .scenario import Scenario, to_toml_dict
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` through ``write(file)`` on a temporary sibling, then rename it into place."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from the user's group
+        with os.fdopen(fd, "wb") as file:
+            write(file)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def check_writable(folder: Path) -> None:
+    """Fail early, before any simulation, if ``folder`` cannot be created or written."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise RunError(f"output folder '{folder}' cannot be written ({exc.strerror or exc}); "
+                       "choose another with --out") from None
+
+
+def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray], metrics: dict) -> list[Path]:
+    """Write a run folder; return the paths written."""
+    folder = Path(folder)
+    written = []
+
+    def put(name: str, write: Callable[[IO[bytes]], None]) -> None:
+        atomic_write(folder / name, write)
+        written.append(folder / name)
+
+    put("scenario.toml", lambda f: f.write(tomli_w.dumps(to_toml_dict(scenario)).encode()))
+    table = pa.table({name: pa.array(np.asarray(values, dtype=np.float64)) for name, values in columns.items()})
+    put("timeseries.parquet", lambda f: pq.write_table(table, f))
+    put("metrics.json", lambda f: f.write((json.dumps(metrics, indent=2, allow_nan=False) + "\n").encode()))
+    window = tuple(metrics["window"])
+    figures = {
+        "path.png": plot_path(columns, title=scenario.name),
+        "states.png": plot_states(columns),
+        "errors.png": plot_errors(columns, window=window),
+        "torques.png": plot_torques(columns, max_torque=scenario.plant_params().max_torque),
+    }
+    for name, fig in figures.items():
+        put(f"figures/{name}", lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
+        plt.close(fig)
+    return written

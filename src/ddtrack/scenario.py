@@ -1,0 +1,634 @@
+"""Scenario files: TOML -> validated pydantic models -> runtime objects, through registries (DESIGN 4).
+
+Every user mistake becomes a :class:`~ddtrack.errors.ConfigError` naming the field (``robot.mass``)
+and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left out takes the
+``[robot]`` value.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import tomllib
+import types
+import typing
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import jax
+import jax.numpy as jnp
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+
+from .controllers import Backstepping, Cascade, ComputedTorque, WheelPD
+from .errors import ConfigError, did_you_mean
+from .model import MeasurementNoise, RobotParams, WheelDisturbance
+from .trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square
+
+Positive = Annotated[float, Field(gt=0.0)]
+NonNegative = Annotated[float, Field(ge=0.0)]
+Pair = tuple[float, float]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=False)
+
+
+# --- [simulation] -------------------------------------------------------------------------------
+
+
+class SimulationConfig(_Section):
+    duration: Positive = Field(40.0, description="Length of the run [s].")
+    control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
+    substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
+    metric_window: Pair | None = Field(None, description="[start, end] of the error statistics [s]; "
+                                                         "default the whole run.")
+    seed: int = Field(0, ge=0, description="Seed of every random draw of the run.")
+    settling_threshold: Positive = Field(0.1, description="e_tr below which the run counts as settled [m].")
+    divergence_error: Positive = Field(50.0, description="Tracking error at which a run is declared diverged [m].")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SimulationConfig:
+        steps = self.duration / self.control_period
+        if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
+            raise ValueError(f"duration {self.duration} s is not a whole number of control periods "
+                             f"({self.control_period} s); choose a duration that is a multiple of it")
+        if self.metric_window is not None:
+            start, end = self.metric_window
+            if not 0.0 <= start < end <= self.duration + 1e-9:
+                raise ValueError(f"metric_window {list(self.metric_window)} must satisfy 0 <= start < end <= "
+                                 f"duration ({self.duration} s)")
+        return self
+
+    @property
+    def n_steps(self) -> int:
+        return round(self.duration / self.control_period)
+
+    @property
+    def window(self) -> Pair:
+        return self.metric_window if self.metric_window is not None else (0.0, self.duration)
+
+
+# --- [robot], [plant], [randomize] --------------------------------------------------------------
+
+
+class RobotConfig(_Section):
+    """The nominal model: what the controller believes."""
+
+    mass: Positive = Field(10.0, description="Total mass m [kg].")
+    inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
+    com_offset: float = Field(0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass "
+                                                                 "ahead of the axle [m].")
+    wheel_radius: Positive = Field(0.05, le=2.0, description="Wheel radius R [m].")
+    half_axle: Positive = Field(0.25, le=5.0, description="Half the wheel separation L [m].")
+    max_torque: Positive = Field(10.0, description="Torque limit per wheel [N m].")
+    viscous_friction: NonNegative = Field(0.0, description="Viscous wheel friction b_w [N m s/rad].")
+    coulomb_friction: NonNegative = Field(0.0, description="Coulomb wheel friction tau_c [N m].")
+    friction_smoothing: Positive = Field(0.01, description="tanh smoothing wheel speed eps_f [rad/s].")
+
+    def params(self) -> RobotParams:
+        return RobotParams(**self.model_dump())
+
+
+class PlantConfig(_Section):
+    """The true robot; every key left out takes the [robot] value."""
+
+    mass: Positive | None = None
+    inertia: Positive | None = None
+    com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = None
+    wheel_radius: Annotated[float, Field(gt=0.0, le=2.0)] | None = None
+    half_axle: Annotated[float, Field(gt=0.0, le=5.0)] | None = None
+    max_torque: Positive | None = None
+    viscous_friction: NonNegative | None = None
+    coulomb_friction: NonNegative | None = None
+    friction_smoothing: Positive | None = None
+
+
+class ParameterDraw(_Section):
+    """A random plant parameter, drawn per run: value * (1 + r) (``relative``) or value + r (``absolute``),
+    r uniform on [-spread, spread] or normal with std = spread truncated at 3 std."""
+
+    distribution: Literal["uniform", "normal"] = "uniform"
+    relative: NonNegative | None = None
+    absolute: NonNegative | None = None
+
+    @model_validator(mode="after")
+    def _one_spread(self) -> ParameterDraw:
+        if (self.relative is None) == (self.absolute is None):
+            raise ValueError("give exactly one of 'relative' (fraction of the value) or 'absolute' (same unit)")
+        return self
+
+    @property
+    def reach(self) -> float:
+        """Largest possible |r|."""
+        spread = self.relative if self.relative is not None else self.absolute
+        return spread * (3.0 if self.distribution == "normal" else 1.0)
+
+
+class RandomizeConfig(_Section):
+    mass: ParameterDraw | None = None
+    inertia: ParameterDraw | None = None
+    com_offset: ParameterDraw | None = None
+    wheel_radius: ParameterDraw | None = None
+    half_axle: ParameterDraw | None = None
+    viscous_friction: ParameterDraw | None = None
+    coulomb_friction: ParameterDraw | None = None
+
+
+# --- [disturbance], [noise] ----------------------------------------------------------------------
+
+
+class NoDisturbance(_Section):
+    """No disturbance."""
+
+    kind: Literal["none"] = "none"
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance()
+
+
+class ConstantDisturbance(_Section):
+    """Constant wheel torques, opposing the drive when positive."""
+
+    kind: Literal["constant"]
+    torque: Pair = Field(description="[right, left] wheel torque [N m].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.torque)
+
+
+class SinusoidDisturbance(_Section):
+    """bias + amplitude * sin(frequency t + phase), per wheel (SPEC 1.4's default)."""
+
+    kind: Literal["sinusoid"]
+    bias: Pair = Field((0.0, 0.0), description="[right, left] constant part [N m].")
+    amplitude: Pair = Field(description="[right, left] amplitude [N m].")
+    frequency: NonNegative = Field(description="Angular frequency [rad/s].")
+    phase: Pair = Field((0.0, 0.0), description="[right, left] phase [rad].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.bias, amplitude=self.amplitude, frequency=self.frequency, phase=self.phase)
+
+
+class GaussianDisturbance(_Section):
+    """Normal torques drawn from the run's seed and held over each control period."""
+
+    kind: Literal["gaussian"]
+    mean: Pair = Field((0.0, 0.0), description="[right, left] mean [N m].")
+    std: tuple[NonNegative, NonNegative] = Field(description="[right, left] standard deviation [N m].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.mean, std=self.std)
+
+
+DisturbanceConfig = Annotated[
+    Union[NoDisturbance, ConstantDisturbance, SinusoidDisturbance, GaussianDisturbance], Field(discriminator="kind")
+]
+
+
+class NoiseConfig(_Section):
+    """Gaussian measurement noise on what the controller sees (the true state is recorded)."""
+
+    position_std: NonNegative = Field(0.0, description="On x and y [m].")
+    heading_std: NonNegative = Field(0.0, description="On theta [rad].")
+    velocity_std: NonNegative = Field(0.0, description="On v [m/s].")
+    yaw_rate_std: NonNegative = Field(0.0, description="On omega [rad/s].")
+
+    def build(self) -> MeasurementNoise:
+        p, h = self.position_std, self.heading_std
+        return MeasurementNoise(std=(p, p, h, self.velocity_std, self.yaw_rate_std))
+
+
+# --- [trajectory] --------------------------------------------------------------------------------
+
+
+class LineTrajectory(_Section):
+    """Straight line at constant speed (the paper's y = x is heading = pi/4)."""
+
+    kind: Literal["line"]
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    start: Pair = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    heading: float = Field(0.0, description="Direction [rad].")
+
+    def build(self) -> Trajectory:
+        return Line(start=self.start, heading=self.heading, speed=self.speed)
+
+
+class SquareTrajectory(_Section):
+    """The paper's square, counter-clockwise from ``corner`` with heading 0 (SPEC 4.3)."""
+
+    kind: Literal["square"]
+    corner: Pair = Field((10.0, 0.0), description="Starting corner C0 [m].")
+    side: Positive = Field(10.0, description="Side S [m].")
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    corner_radius: NonNegative = Field(0.0, description="Fillet radius at C1..C3 [m]; 0 = sharp corners.")
+
+    @model_validator(mode="after")
+    def _fits(self) -> SquareTrajectory:
+        if 2.0 * self.corner_radius > self.side:
+            raise ValueError(f"corner_radius {self.corner_radius} m does not fit on a side of {self.side} m; "
+                             "use at most side / 2")
+        return self
+
+    def build(self) -> Trajectory:
+        return square(corner=self.corner, side=self.side, speed=self.speed, corner_radius=self.corner_radius)
+
+
+class CircleTrajectory(_Section):
+    """Circle at constant speed."""
+
+    kind: Literal["circle"]
+    center: Pair = Field((0.0, 0.0), description="Centre [m].")
+    radius: Positive = Field(2.0, description="Radius [m].")
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    start_angle: float = Field(-math.pi / 2, description="Polar angle of the start point about the centre [rad].")
+    clockwise: bool = Field(False, description="Direction of travel.")
+
+    def build(self) -> Trajectory:
+        return Circle(center=self.center, radius=self.radius, speed=self.speed, start_angle=self.start_angle,
+                      clockwise=self.clockwise)
+
+
+class FigureEightTrajectory(_Section):
+    """Lemniscate of Gerono (the speed varies between size*w and sqrt(2)*size*w, w = 2 pi / period)."""
+
+    kind: Literal["figure_eight"]
+    center: Pair = Field((0.0, 0.0), description="Crossing point [m].")
+    size: Positive = Field(3.0, description="Half-width [m].")
+    period: Positive = Field(60.0, description="Time for both lobes [s].")
+
+    def build(self) -> Trajectory:
+        return FigureEight(center=self.center, size=self.size, period=self.period)
+
+
+class SinusoidTrajectory(_Section):
+    """A sine wave about a straight axis run at constant speed."""
+
+    kind: Literal["sinusoid"]
+    start: Pair = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    heading: float = Field(0.0, description="Direction of the axis [rad].")
+    speed: Positive = Field(0.5, description="Speed along the axis [m/s].")
+    amplitude: NonNegative = Field(1.0, description="Lateral amplitude [m].")
+    wavelength: Positive = Field(10.0, description="Wavelength along the axis [m].")
+
+    def build(self) -> Trajectory:
+        return Sinusoid(start=self.start, heading=self.heading, speed=self.speed, amplitude=self.amplitude,
+                        wavelength=self.wavelength)
+
+
+class WaypointsTrajectory(_Section):
+    """A polyline through waypoints at constant speed with rounded corners.
+
+    ``file`` is a CSV of x,y rows (an optional header line), relative to the scenario file; the
+    resolved scenario holds the points inline instead.
+    """
+
+    kind: Literal["waypoints"]
+    file: str | None = Field(None, description="CSV file of x,y rows, relative to the scenario file.")
+    points: list[Pair] | None = Field(None, description="Inline [[x, y], ...] instead of a file [m].")
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    corner_radius: NonNegative = Field(0.0, description="Fillet radius at interior waypoints [m].")
+    loop: bool = Field(False, description="Repeat the path; otherwise the reference stops at the end.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _read_file(cls, data: Any, info: ValidationInfo) -> Any:
+        if isinstance(data, dict) and data.get("file") is not None and data.get("points") is None:
+            if not isinstance(data["file"], str):
+                return data  # the type error is reported by the field
+            base = Path((info.context or {}).get("base_dir", "."))
+            data = {**data, "points": read_waypoints(base / data["file"]), "file": None}
+        return data
+
+    @model_validator(mode="after")
+    def _valid_path(self) -> WaypointsTrajectory:
+        if self.points is None:
+            raise ValueError("give 'file' (a CSV of x,y rows) or 'points' ([[x, y], ...])")
+        if self.file is not None:
+            raise ValueError("give only one of 'file' and 'points'")
+        self.build()  # a ValueError names the bad point or leg
+        return self
+
+    def build(self) -> Trajectory:
+        return polyline_path(self.points, speed=self.speed, corner_radius=self.corner_radius, loop=self.loop)
+
+
+TrajectoryConfig = Annotated[
+    Union[LineTrajectory, SquareTrajectory, CircleTrajectory, FigureEightTrajectory, SinusoidTrajectory,
+          WaypointsTrajectory],
+    Field(discriminator="kind"),
+]
+
+
+def read_waypoints(path: Path) -> list[Pair]:
+    """Read x,y rows from a CSV file (one optional header line)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"waypoints file '{path}' does not exist") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"waypoints file '{path}' is not UTF-8 text; give a CSV of x,y rows") from None
+    except OSError as exc:
+        raise ValueError(f"waypoints file '{path}' cannot be read ({exc.strerror})") from None
+    points = []
+    for number, row in enumerate(csv.reader(text.splitlines()), start=1):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        try:
+            if len(row) != 2:
+                raise ValueError
+            points.append((float(row[0]), float(row[1])))
+        except ValueError:
+            if number == 1 and not points:
+                continue  # a header line
+            raise ValueError(f"waypoints file '{path}' line {number}: expected two numbers 'x,y', "
+                             f"got {','.join(row)[:40]!r}") from None
+    return points
+
+
+# --- [initial], [controller] ---------------------------------------------------------------------
+
+
+class InitialConfig(_Section):
+    pose: tuple[float, float, float] | None = Field(None, description="[x, y, theta] of the axle midpoint; "
+                                                                      "default the reference pose at t = 0.")
+    velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
+
+
+class BacksteppingConfig(_Section):
+    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+
+    kind: Literal["backstepping"] = "backstepping"
+    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
+    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
+    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
+
+    @model_validator(mode="after")
+    def _strict_needs_computed_torque(self) -> BacksteppingConfig:
+        if self.strict and self.inner != "computed_torque":
+            raise ValueError("strict = true needs inner = \"computed_torque\" (the cross term enters eq. 11)")
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float) -> Cascade:
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
+                             max_yaw_rate=self.max_yaw_rate, strict=self.strict)
+        if self.inner == "computed_torque":
+            return Cascade(outer, ComputedTorque(nominal, kc=self.kc))
+        return Cascade(outer, WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period))
+
+
+ControllerConfig = BacksteppingConfig
+
+
+# --- the scenario --------------------------------------------------------------------------------
+
+
+class Scenario(_Section):
+    """A whole scenario file (DESIGN 4)."""
+
+    name: str = Field(min_length=1, max_length=200, description="Name of the scenario.")
+    description: str = Field("", max_length=10_000)
+    simulation: SimulationConfig = SimulationConfig()
+    robot: RobotConfig = RobotConfig()
+    plant: PlantConfig = PlantConfig()
+    randomize: RandomizeConfig = RandomizeConfig()
+    disturbance: DisturbanceConfig = NoDisturbance()
+    noise: NoiseConfig = NoiseConfig()
+    trajectory: TrajectoryConfig
+    initial: InitialConfig = InitialConfig()
+    controller: ControllerConfig = BacksteppingConfig()
+
+    @model_validator(mode="after")
+    def _draws_keep_parameters_physical(self) -> Scenario:
+        plant = self.plant_params()
+        for field, draw in self.randomize:
+            if draw is None or field == "com_offset":
+                continue
+            value = getattr(plant, field)
+            low = value * (1 - draw.reach) if draw.relative is not None else value - draw.reach
+            if low <= 0.0 if field in ("mass", "inertia", "wheel_radius", "half_axle") else low < 0.0:
+                raise ValueError(f"randomize.{field} can draw a non-physical value ({low:.3g}); "
+                                 "use a smaller spread")
+        return self
+
+    def plant_params(self) -> RobotParams:
+        """The true plant's nominal values: [plant] over [robot]."""
+        merged = self.robot.model_dump() | {k: v for k, v in self.plant.model_dump().items() if v is not None}
+        return RobotParams(**merged)
+
+
+# --- registries (what `ddtrack list` shows) -------------------------------------------------------
+
+
+def _registry(union: Any) -> dict[str, type[BaseModel]]:
+    members = typing.get_args(typing.get_args(union)[0]) if typing.get_origin(union) is Annotated else (union,)
+    return {typing.get_args(m.model_fields["kind"].annotation)[0]: m for m in members}
+
+
+TRAJECTORIES = _registry(TrajectoryConfig)
+DISTURBANCES = _registry(DisturbanceConfig)
+CONTROLLERS = _registry(ControllerConfig)
+
+
+def summary(model: type[BaseModel]) -> str:
+    """First line of a config model's docstring."""
+    return (model.__doc__ or "").strip().splitlines()[0]
+
+
+# --- loading --------------------------------------------------------------------------------------
+
+
+def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int | None = None,
+                  controller: str | None = None) -> Scenario:
+    """Read, override and validate a scenario file.
+
+    Parameters
+    ----------
+    path : the TOML file
+    overrides : ``"section.key=value"`` strings; ``value`` is read as TOML (``1.5``, ``[1, 2]``,
+        ``"pd"``) and as a plain string when it is not valid TOML
+    seed : replaces ``simulation.seed``
+    controller : replaces ``controller.kind``
+
+    Raises
+    ------
+    ConfigError
+        naming the field and the fix, for any problem with the file or the overrides.
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise ConfigError("", f"scenario file '{path}' does not exist",
+                          "check the path; `ddtrack list` does not list files, see scenarios/") from None
+    except IsADirectoryError:
+        raise ConfigError("", f"'{path}' is a folder, not a scenario file", "give a .toml file") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError("", f"scenario file '{path}' is not UTF-8 (byte {exc.start})", "save it as UTF-8") from None
+    except OSError as exc:
+        raise ConfigError("", f"scenario file '{path}' cannot be read: {exc.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("", f"'{path}' is not valid TOML: {exc}", "see docs/scenarios.md for the format") from None
+    for override in overrides:
+        apply_override(data, override)
+    if seed is not None:
+        data.setdefault("simulation", {})
+        if isinstance(data["simulation"], dict):
+            data["simulation"]["seed"] = seed
+    if controller is not None:
+        section = data.setdefault("controller", {})
+        if isinstance(section, dict):
+            section["kind"] = controller
+    return validate_scenario(data, base_dir=path.parent)
+
+
+def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Scenario:
+    """Validate a scenario given as a dict; relative waypoint files are read from ``base_dir``."""
+    try:
+        return Scenario.model_validate(data, context={"base_dir": str(base_dir)})
+    except ValidationError as exc:
+        raise _config_error(exc) from None
+
+
+def apply_override(data: dict[str, Any], override: str) -> None:
+    """Apply one ``section.key=value`` override to the raw scenario dict, in place."""
+    dotted, sep, raw = override.partition("=")
+    keys = [k.strip() for k in dotted.split(".")]
+    if not sep or not all(keys):
+        raise ConfigError("--set", f"'{override}' is not of the form section.key=value",
+                          "e.g. --set robot.mass=12 or --set controller.gains=[1,55,15]")
+    try:
+        value = tomllib.loads(f"value = {raw}")["value"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    node = data
+    for depth, key in enumerate(keys[:-1]):
+        child = node.setdefault(key, {})
+        if not isinstance(child, dict):
+            raise ConfigError(".".join(keys[: depth + 1]), "is a value, not a section", f"cannot set '{dotted}'")
+        node = child
+    node[keys[-1]] = value
+
+
+def _config_error(exc: ValidationError) -> ConfigError:
+    """Turn pydantic's first error into a one-line message with the field path and a hint."""
+    error = exc.errors()[0]
+    model, path = _walk(error["loc"])
+    field = ".".join(path)
+    kind, message = error["type"], error["msg"].removeprefix("Value error, ")
+    if kind == "extra_forbidden" and model is not None:
+        return ConfigError(field, "unknown key", did_you_mean(path[-1], model.model_fields))
+    if kind == "union_tag_invalid":
+        choices = [c.strip(" '") for c in str(error["ctx"]["expected_tags"]).split(",")]
+        return ConfigError(field + ".kind", f"unknown kind {error['ctx']['tag']!r}", did_you_mean(error["ctx"]["tag"], choices))
+    if kind == "union_tag_not_found":
+        return ConfigError(field + ".kind", "is missing", "add kind = \"...\"; `ddtrack list` shows the kinds")
+    if kind == "literal_error":
+        choices = [c.strip(" '\"") for c in error["ctx"]["expected"].replace(" or ", ",").split(",")]
+        return ConfigError(field, f"{error['input']!r} is not allowed", did_you_mean(str(error["input"]), choices))
+    if kind == "missing":
+        return ConfigError(field, "is required", "add it to the scenario (docs/scenarios.md lists every key)")
+    if kind == "finite_number":
+        return ConfigError(field, "must be a finite number (got NaN or inf)")
+    got = error.get("input")
+    shown = "" if isinstance(got, dict) or kind.startswith("value_error") else f" (got {got!r:.60})"
+    return ConfigError(field, message + shown)
+
+
+def _walk(loc: Iterable[Any]) -> tuple[type[BaseModel] | None, list[str]]:
+    """Follow a pydantic error location through the models; drop union tags from the path."""
+    model: Any = Scenario
+    parent: type[BaseModel] | None = Scenario
+    path: list[str] = []
+    for part in loc:
+        if isinstance(model, dict):  # a discriminated union: the part is the tag
+            model = model.get(part)
+            continue
+        path.append(str(part))
+        parent = model if isinstance(model, type) and issubclass(model, BaseModel) else None
+        if parent is None or part not in parent.model_fields:
+            model = None
+            continue
+        annotation = parent.model_fields[part].annotation
+        model = _model_of(annotation)
+    return parent, path
+
+
+def _model_of(annotation: Any) -> Any:
+    """The model (or tag -> model dict for a union) behind a field annotation, else None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    if typing.get_origin(annotation) is Annotated:
+        return _model_of(typing.get_args(annotation)[0])
+    if typing.get_origin(annotation) in (Union, types.UnionType):
+        members = [a for a in typing.get_args(annotation) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if len(members) == 1:
+            return members[0]
+        if members and all("kind" in m.model_fields for m in members):
+            return {typing.get_args(m.model_fields["kind"].annotation)[0]: m for m in members}
+    return None
+
+
+# --- runtime objects -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Everything :func:`ddtrack.sim.simulate` needs, built from a scenario (randomness not yet drawn)."""
+
+    nominal: RobotParams
+    plant_params: RobotParams
+    controller: Any
+    trajectory: Trajectory
+    x0: jax.Array
+    disturbance: WheelDisturbance
+    noise: MeasurementNoise
+
+
+def build(scenario: Scenario, plant_params: RobotParams | None = None) -> Setup:
+    """Build the runtime objects; ``plant_params`` replaces the plant (e.g. a random draw)."""
+    nominal = scenario.robot.params()
+    sim = scenario.simulation
+    trajectory = scenario.trajectory.build()
+    if scenario.initial.pose is None:
+        ref0 = trajectory(0.0)
+        pose = (float(ref0.x), float(ref0.y), float(ref0.theta))
+    else:
+        pose = scenario.initial.pose
+    x0 = jnp.asarray([*pose, *scenario.initial.velocity], dtype=float)
+    return Setup(
+        nominal=nominal,
+        plant_params=plant_params if plant_params is not None else scenario.plant_params(),
+        controller=scenario.controller.build(nominal, sim.control_period),
+        trajectory=trajectory,
+        x0=x0,
+        disturbance=scenario.disturbance.build(),
+        noise=scenario.noise.build(),
+    )
+
+
+def to_toml_dict(scenario: Scenario) -> dict[str, Any]:
+    """The fully resolved scenario (defaults included, no None values) as a TOML-ready dict."""
+    return _drop_none(scenario.model_dump(mode="json"))
+
+
+def _drop_none(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list):
+        return [_drop_none(v) for v in value]
+    return value
+
+
+__all__ = [
+    "CONTROLLERS", "DISTURBANCES", "TRAJECTORIES", "Scenario", "Setup", "apply_override", "build",
+    "load_scenario", "read_waypoints", "summary", "to_toml_dict", "validate_scenario",
+]

@@ -1,0 +1,6 @@
+"""The simulator: fixed-step RK4 under a zero-order hold, one ``lax.scan`` per run (DESIGN 3)."""
+from .integrators import rk4, rk4_step
+from .result import REMEDIES, STATUS_NAMES, SimResult, timeseries
+from .simulate import Draws, simulate
+
+__all__ = ["Draws", "REMEDIES", "STATUS_NAMES", "SimResult", "rk4", "rk4_step", "simulate", "timeseries"]

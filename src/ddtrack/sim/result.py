@@ -1,0 +1,76 @@
+"""The outcome of a simulation."""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from jax import Array
+
+from ..trajectories import Reference
+
+STATUS_NAMES = ("ok", "diverged", "non_finite")
+REMEDIES = {
+    "ok": "",
+    "diverged": "the tracking error or the speed left its bounds: lower the gains, move the initial pose "
+                "closer to the reference, or raise simulation.divergence_error",
+    "non_finite": "the state or the control became NaN/inf: shorten simulation.control_period, raise "
+                  "simulation.substeps, or check the controller",
+}
+
+
+class SimResult(NamedTuple):
+    """Time series of a closed-loop run, one row per control period k (t_k = k T_c).
+
+    Rows after a failure repeat the frozen last state; :attr:`n_valid` says how many rows count.
+    """
+
+    t: Array  #: (N,) sample times [s]
+    state: Array  #: (N, 5) true state x_k = [x, y, theta, v, omega] at t_k
+    reference: Reference  #: fields of shape (N,)
+    error: Array  #: (N, 3) posture error [e_x, e_y, e_theta] of the true state (SPEC 2.2)
+    control: Array  #: (N, 2) plant input held over [t_k, t_k+1): torques [N m] or (v, omega)
+    logs: dict  #: name -> (N,) logged scalars
+    status: Array  #: 0 ok, 1 diverged, 2 non_finite
+    failure_index: Array  #: first failing row k, or -1
+
+    @property
+    def status_name(self) -> str:
+        return STATUS_NAMES[int(self.status)]
+
+    @property
+    def n_valid(self) -> int:
+        """Rows 0..n_valid-1 are the run; for a failed run, the last one is the step that failed."""
+        k = int(self.failure_index)
+        return int(np.shape(self.t)[0]) if k < 0 else k + 1
+
+    @property
+    def failure_time(self) -> float | None:
+        k = int(self.failure_index)
+        return None if k < 0 else float(self.t[k])
+
+
+def timeseries(result: SimResult) -> dict[str, np.ndarray]:
+    """The documented time-series columns (DESIGN 4) of the valid rows, as float64 NumPy arrays.
+
+    ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
+    v_cmd, omega_cmd, tau_r, tau_l`` and every logged scalar (``kx, ky, ktheta``, ``saturated``, ...).
+    Torques are NaN for a velocity-input plant.
+    """
+    n = result.n_valid
+    rows = slice(0, n)
+    state = np.asarray(result.state, dtype=float)[rows]
+    error = np.asarray(result.error, dtype=float)[rows]
+    control = np.asarray(result.control, dtype=float)[rows]
+    logs = {name: np.asarray(value, dtype=float)[rows] for name, value in result.logs.items()}
+    ref = {name: np.asarray(value, dtype=float)[rows] for name, value in result.reference._asdict().items()}
+    nan = np.full(n, np.nan)
+    is_torque = "v_cmd" in logs  # a cascade logs its velocity command; its control is torque
+    columns = {
+        "t": np.asarray(result.t, dtype=float)[rows],
+        "x": state[:, 0], "y": state[:, 1], "theta": state[:, 2], "v": state[:, 3], "omega": state[:, 4],
+        "x_ref": ref["x"], "y_ref": ref["y"], "theta_ref": ref["theta"], "v_ref": ref["v"], "omega_ref": ref["omega"],
+        "e_x": error[:, 0], "e_y": error[:, 1], "e_theta": error[:, 2], "e_tr": np.hypot(error[:, 0], error[:, 1]),
+        "v_cmd": logs.pop("v_cmd", control[:, 0]), "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
+        "tau_r": control[:, 0] if is_torque else nan, "tau_l": control[:, 1] if is_torque else nan,
+    }
+    return columns | logs

@@ -1,0 +1,9 @@
+"""Reference trajectories: pure functions of time returning a :class:`Reference` (SPEC 2.1, 4.2, 4.3)."""
+from .base import ParametricCurve, Reference, Trajectory
+from .curves import Circle, FigureEight, Line, Sinusoid
+from .paths import PiecewisePath, polyline_path, square
+
+__all__ = [
+    "Circle", "FigureEight", "Line", "ParametricCurve", "PiecewisePath", "Reference", "Sinusoid", "Trajectory",
+    "polyline_path", "square",
+]
