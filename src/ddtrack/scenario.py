@@ -7,6 +7,7 @@ and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left 
 from __future__ import annotations
 
 import csv
+import json
 import math
 import tomllib
 import types
@@ -30,6 +31,17 @@ NonNegative = Annotated[float, Field(ge=0.0)]
 Pair = tuple[float, float]
 
 
+class FieldError(ValueError):
+    """A validator's error about one field of its section (so the message names ``section.field``)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+MAX_CONTROL_PERIODS = 2_000_000  # about 0.5 GB of recorded series; longer runs belong in chunks
+
+
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=False)
 
@@ -50,14 +62,18 @@ class SimulationConfig(_Section):
     @model_validator(mode="after")
     def _consistent(self) -> SimulationConfig:
         steps = self.duration / self.control_period
+        if steps > MAX_CONTROL_PERIODS:
+            raise FieldError("duration", f"{self.duration:g} s at {self.control_period:g} s per period is "
+                             f"{steps:.3g} control periods, over the limit of {MAX_CONTROL_PERIODS:,}; "
+                             "shorten duration or lengthen control_period")
         if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
-            raise ValueError(f"duration {self.duration} s is not a whole number of control periods "
-                             f"({self.control_period} s); choose a duration that is a multiple of it")
+            raise FieldError("duration", f"{self.duration:g} s is not a whole number of control periods "
+                             f"({self.control_period:g} s); choose a duration that is a multiple of it")
         if self.metric_window is not None:
             start, end = self.metric_window
             if not 0.0 <= start < end <= self.duration + 1e-9:
-                raise ValueError(f"metric_window {list(self.metric_window)} must satisfy 0 <= start < end <= "
-                                 f"duration ({self.duration} s)")
+                raise FieldError("metric_window", f"{list(self.metric_window)} must satisfy 0 <= start < end <= "
+                                 f"duration ({self.duration:g} s)")
         return self
 
     @property
@@ -115,7 +131,8 @@ class ParameterDraw(_Section):
     @model_validator(mode="after")
     def _one_spread(self) -> ParameterDraw:
         if (self.relative is None) == (self.absolute is None):
-            raise ValueError("give exactly one of 'relative' (fraction of the value) or 'absolute' (same unit)")
+            raise FieldError("relative", "give exactly one of 'relative' (fraction of the value) or 'absolute' "
+                             "(same unit)")
         return self
 
     @property
@@ -226,7 +243,7 @@ class SquareTrajectory(_Section):
     @model_validator(mode="after")
     def _fits(self) -> SquareTrajectory:
         if 2.0 * self.corner_radius > self.side:
-            raise ValueError(f"corner_radius {self.corner_radius} m does not fit on a side of {self.side} m; "
+            raise FieldError("corner_radius", f"{self.corner_radius:g} m does not fit on a side of {self.side:g} m; "
                              "use at most side / 2")
         return self
 
@@ -297,16 +314,24 @@ class WaypointsTrajectory(_Section):
             if not isinstance(data["file"], str):
                 return data  # the type error is reported by the field
             base = Path((info.context or {}).get("base_dir", "."))
-            data = {**data, "points": read_waypoints(base / data["file"]), "file": None}
+            try:
+                data = {**data, "points": read_waypoints(base / data["file"]), "file": None}
+            except ValueError as exc:
+                raise FieldError("file", str(exc)) from None
+        if isinstance(data, dict) and isinstance(data.get("points"), list):  # TOML arrays -> [x, y] tuples
+            data = {**data, "points": [tuple(p) if isinstance(p, list) else p for p in data["points"]]}
         return data
 
     @model_validator(mode="after")
     def _valid_path(self) -> WaypointsTrajectory:
         if self.points is None:
-            raise ValueError("give 'file' (a CSV of x,y rows) or 'points' ([[x, y], ...])")
+            raise FieldError("points", "give 'file' (a CSV of x,y rows) or 'points' ([[x, y], ...])")
         if self.file is not None:
-            raise ValueError("give only one of 'file' and 'points'")
-        self.build()  # a ValueError names the bad point or leg
+            raise FieldError("file", "give only one of 'file' and 'points'")
+        try:
+            self.build()
+        except ValueError as exc:  # names the bad point or leg
+            raise FieldError("points", str(exc)) from None
         return self
 
     def build(self) -> Trajectory:
@@ -371,7 +396,7 @@ class BacksteppingConfig(_Section):
     @model_validator(mode="after")
     def _strict_needs_computed_torque(self) -> BacksteppingConfig:
         if self.strict and self.inner != "computed_torque":
-            raise ValueError("strict = true needs inner = \"computed_torque\" (the cross term enters eq. 11)")
+            raise FieldError("strict", "strict = true needs inner = \"computed_torque\" (the cross term enters eq. 11)")
         return self
 
     def build(self, nominal: RobotParams, control_period: float) -> Cascade:
@@ -412,8 +437,9 @@ class Scenario(_Section):
                 continue
             value = getattr(plant, field)
             low = value * (1 - draw.reach) if draw.relative is not None else value - draw.reach
-            if low <= 0.0 if field in ("mass", "inertia", "wheel_radius", "half_axle") else low < 0.0:
-                raise ValueError(f"randomize.{field} can draw a non-physical value ({low:.3g}); "
+            must_be_positive = field in ("mass", "inertia", "wheel_radius", "half_axle")
+            if low <= 0.0 if must_be_positive else low < 0.0:
+                raise FieldError(f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); "
                                  "use a smaller spread")
         return self
 
@@ -493,7 +519,9 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
 def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Scenario:
     """Validate a scenario given as a dict; relative waypoint files are read from ``base_dir``."""
     try:
-        return Scenario.model_validate(data, context={"base_dir": str(base_dir)})
+        # JSON mode + strict: TOML arrays become tuples, ints become floats, but "10" and true are not numbers
+        text = json.dumps(data, default=str, allow_nan=True)
+        return Scenario.model_validate_json(text, strict=True, context={"base_dir": str(base_dir)})
     except ValidationError as exc:
         raise _config_error(exc) from None
 
@@ -522,7 +550,10 @@ def _config_error(exc: ValidationError) -> ConfigError:
     """Turn pydantic's first error into a one-line message with the field path and a hint."""
     error = exc.errors()[0]
     model, path = _walk(error["loc"])
-    field = ".".join(path)
+    cause = error.get("ctx", {}).get("error")
+    if isinstance(cause, FieldError):
+        path.append(cause.field)
+    field = ".".join(path).replace(".[", "[")
     kind, message = error["type"], error["msg"].removeprefix("Value error, ")
     if kind == "extra_forbidden" and model is not None:
         return ConfigError(field, "unknown key", did_you_mean(path[-1], model.model_fields))
@@ -552,7 +583,7 @@ def _walk(loc: Iterable[Any]) -> tuple[type[BaseModel] | None, list[str]]:
         if isinstance(model, dict):  # a discriminated union: the part is the tag
             model = model.get(part)
             continue
-        path.append(str(part))
+        path.append(f"[{part}]" if isinstance(part, int) else str(part))
         parent = model if isinstance(model, type) and issubclass(model, BaseModel) else None
         if parent is None or part not in parent.model_fields:
             model = None

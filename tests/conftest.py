@@ -1,0 +1,24 @@
+"""Shared fixtures: paths of the shipped scenarios and a helper that runs the CLI in-process."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import ddtrack  # noqa: F401  (turns on float64 before any test builds an array)
+from ddtrack.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenarios"
+
+
+@pytest.fixture
+def cli(capsys):
+    """Run ``ddtrack ARGS`` in-process; return (exit code, stdout, stderr)."""
+
+    def invoke(*args: str) -> tuple[int, str, str]:
+        code = main([str(a) for a in args])
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return invoke

@@ -1,0 +1,141 @@
+"""The CLI and the run folder (DESIGN 4): files, columns, keys, exit codes, atomic writes."""
+from __future__ import annotations
+
+import json
+import os
+import stat
+import tomllib
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from conftest import SCENARIOS
+from ddtrack import load_scenario
+from ddtrack.rundir import atomic_write
+
+COLUMNS = ["t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref", "e_x", "e_y",
+           "e_theta", "e_tr", "v_cmd", "omega_cmd", "tau_r", "tau_l"]
+METRIC_KEYS = {"status", "window", "e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort",
+               "saturation_fraction"}
+
+
+@pytest.fixture(scope="module")
+def paper_line_run(tmp_path_factory):
+    """One `ddtrack run` of the paper's line case, shared by the tests that read its folder."""
+    from ddtrack.cli import main
+
+    out = tmp_path_factory.mktemp("run") / "paper_line"
+    code = main(["run", str(SCENARIOS / "paper_line.toml"), "--out", str(out)])
+    return code, out
+
+
+def test_run_writes_the_documented_folder(paper_line_run):
+    code, out = paper_line_run
+    assert code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["figures", "metrics.json", "scenario.toml", "timeseries.parquet"]
+    figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert figures == ["errors.png", "path.png", "states.png", "torques.png"]
+    for png in (out / "figures").iterdir():
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    mode = stat.S_IMODE((out / "metrics.json").stat().st_mode)
+    assert mode & stat.S_IRGRP or os.umask(0o022) & stat.S_IRGRP  # follows the umask, not mkstemp's 0600
+
+
+def test_timeseries_columns_and_types(paper_line_run):
+    _, out = paper_line_run
+    table = pq.read_table(out / "timeseries.parquet")
+    assert table.column_names[: len(COLUMNS)] == COLUMNS
+    assert {"kx", "ky", "ktheta", "saturated"} <= set(table.column_names)
+    assert all(str(field.type) == "double" for field in table.schema)
+    t = table.column("t").to_numpy()
+    assert len(t) == 4000 and t[0] == 0.0 and np.allclose(np.diff(t), 0.01)
+    e_tr = table.column("e_tr").to_numpy()
+    assert np.allclose(e_tr, np.hypot(table.column("e_x").to_numpy(), table.column("e_y").to_numpy()))
+    assert np.all(np.abs(table.column("tau_r").to_numpy()) <= 10.0)
+
+
+def test_metrics_json(paper_line_run):
+    _, out = paper_line_run
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert METRIC_KEYS | {"final_gains"} == set(metrics)
+    assert metrics["status"] == "ok" and metrics["window"] == [20.0, 40.0]
+    assert metrics["final_gains"] == [1.0, 55.0, 15.0]
+    # SPEC 4.5: under the paper's mismatch, backstepping's steady error is of the order F0/(m k_cv Kx) = 0.046 m
+    assert 0.03 < metrics["e_tr_mean"] < 0.06
+    assert metrics["e_tr_rms"] >= metrics["e_tr_mean"] and metrics["e_tr_max"] >= metrics["e_tr_rms"]
+    assert 0.0 < metrics["settling_time"] < 20.0  # the paper reports about 10 s
+    assert 0.0 < metrics["saturation_fraction"] < 0.5  # the 10 m start saturates, the steady state does not
+
+
+def test_resolved_scenario_reproduces_the_run(paper_line_run, tmp_path, cli):
+    _, out = paper_line_run
+    resolved = load_scenario(out / "scenario.toml")
+    assert resolved == load_scenario(SCENARIOS / "paper_line.toml")
+    assert tomllib.loads((out / "scenario.toml").read_text())["robot"]["friction_smoothing"] == 0.01  # defaults
+    code, _, _ = cli("run", out / "scenario.toml", "--out", tmp_path / "again")
+    assert code == 0
+    first = pq.read_table(out / "timeseries.parquet")
+    again = pq.read_table(tmp_path / "again" / "timeseries.parquet")
+    assert first.equals(again)  # bit for bit
+    assert (out / "metrics.json").read_text() == (tmp_path / "again" / "metrics.json").read_text()
+
+
+def test_diverged_run_exits_1_with_series_up_to_failure(tmp_path, cli):
+    out = tmp_path / "out"
+    code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--set", "simulation.divergence_error=8",
+                          "--out", out)  # the run starts 10 m from the reference
+    assert code == 1
+    assert "diverged at t = 0.00 s" in stderr and "lower the gains" in stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "diverged" and metrics["failure_time"] == 0.0 and metrics["e_tr_mean"] is None
+    assert pq.read_table(out / "timeseries.parquet").num_rows == 1
+
+
+def test_seed_and_set_reach_the_run(tmp_path, cli):
+    code, stdout, _ = cli("run", SCENARIOS / "waypoints.toml", "--seed", "3", "--set", "simulation.duration=5",
+                          "--controller", "backstepping", "--out", tmp_path / "o")
+    assert code == 0 and "seed 3" in stdout
+    resolved = tomllib.loads((tmp_path / "o" / "scenario.toml").read_text())
+    assert resolved["simulation"]["seed"] == 3 and resolved["simulation"]["duration"] == 5.0
+
+
+def test_unwritable_output_fails_before_simulating(tmp_path, cli):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--out", blocker / "run")
+    assert code == 2 and "cannot be written" in stderr
+    assert blocker.read_text() == "not a folder"
+
+
+def test_validate_and_list(cli):
+    code, stdout, _ = cli("validate", SCENARIOS / "paper_square.toml")
+    assert code == 0 and stdout.startswith("ok: paper_square") and "8000 control periods" in stdout
+    code, stdout, _ = cli("list")
+    assert code == 0
+    for name in ("controllers:", "backstepping", "trajectories:", "line", "square", "circle", "figure_eight",
+                 "sinusoid", "waypoints", "disturbances:", "none", "constant", "gaussian"):
+        assert name in stdout
+    code, stdout, _ = cli("list", "disturbances")
+    assert code == 0 and "line" not in stdout and "gaussian" in stdout
+
+
+def test_usage_errors_exit_2(cli):
+    assert cli("frobnicate")[0] == 2
+    assert cli("list", "robots")[0] == 2
+    assert cli("run")[0] == 2
+    assert cli("run", SCENARIOS / "paper_line.toml", "--seed", "-1")[0] == 2
+
+
+def test_atomic_write_leaves_no_partial_file(tmp_path):
+    target = tmp_path / "metrics.json"
+    target.write_text("old")
+
+    def failing(file):
+        file.write(b"half of the new cont")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        atomic_write(target, failing)
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["metrics.json"]  # no temporary left behind

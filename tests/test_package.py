@@ -1,0 +1,139 @@
+"""Package-wide properties: the import layering, float64 outputs, determinism, docstrings, README vs CI."""
+from __future__ import annotations
+
+import ast
+import inspect
+import re
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ddtrack
+from conftest import ROOT, SCENARIOS
+
+PACKAGE = ROOT / "src" / "ddtrack"
+
+# DESIGN 2: imports point down only; modules on one line are siblings and may not import each other.
+LAYERS = [
+    {"errors", "geometry", "_pytree"},
+    {"model", "trajectories"},
+    {"controllers"},
+    {"sim"},
+    {"scenario", "metrics"},
+    {"runner", "plotting"},
+    {"rundir", "report", "envs", "sweep"},
+    {"cli"},
+]
+def _short(seconds: int) -> list[str]:
+    """Overrides that shorten a shipped scenario (its metric window must shrink with it)."""
+    return [f"simulation.duration={seconds}", f"simulation.metric_window=[0, {seconds}]"]
+
+
+RANK = {name: rank for rank, names in enumerate(LAYERS) for name in names}
+
+
+def _top(module_path: Path) -> str:
+    rel = module_path.relative_to(PACKAGE)
+    return rel.parts[0].removesuffix(".py")
+
+
+def _imported_tops(module_path: Path) -> set[str]:
+    tree = ast.parse(module_path.read_text())
+    depth = len(module_path.relative_to(PACKAGE).parts) - 1  # 0 for ddtrack/x.py, 1 for ddtrack/sub/x.py
+    tops = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level > 0:
+            if node.level == depth + 1:  # relative to the package root
+                tops.add(node.module.split(".")[0] if node.module else "")
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("ddtrack"):
+            tops.add(node.module.split(".")[1] if "." in node.module else "")
+    return tops - {""}
+
+
+def test_imports_point_down_only():
+    checked = 0
+    for path in PACKAGE.rglob("*.py"):
+        top = _top(path)
+        if top in ("__init__", "__main__"):
+            continue
+        assert top in RANK, f"{top} has no place in the layering; add it to LAYERS and DESIGN"
+        for imported in _imported_tops(path):
+            assert imported in RANK, f"{path.name} imports unknown module {imported}"
+            assert RANK[imported] < RANK[top], f"{path.relative_to(PACKAGE)} imports {imported} (same or higher layer)"
+            checked += 1
+    assert checked > 20
+
+
+def test_the_simulator_never_imports_a_concrete_controller():
+    for path in (PACKAGE / "sim").glob("*.py"):
+        assert "controllers" not in _imported_tops(path)
+
+
+def test_every_output_array_is_float64():
+    scenario = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*_short(1)])
+    result = ddtrack.run(scenario)
+    leaves = jax.tree_util.tree_leaves((result.t, result.state, result.reference, result.error, result.control,
+                                        result.logs))
+    assert len(leaves) > 15
+    for leaf in leaves:
+        assert leaf.dtype == jnp.float64, leaf.dtype
+    for name, column in ddtrack.timeseries(result).items():
+        assert column.dtype == np.float64, name
+
+
+def test_same_seed_same_bits_other_seed_other_draws():
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*_short(3)])
+    first, again = ddtrack.run(scenario, seed=5), ddtrack.run(scenario, seed=5)
+    other = ddtrack.run(scenario, seed=6)
+    assert np.array_equal(np.asarray(first.state), np.asarray(again.state))
+    assert np.array_equal(np.asarray(first.control), np.asarray(again.control))
+    assert not np.array_equal(np.asarray(first.state), np.asarray(other.state))  # Gaussian disturbance and noise
+
+
+def test_parameter_draws_follow_the_seed_and_leave_the_rest_alone():
+    scenario = ddtrack.load_scenario(SCENARIOS / "waypoints.toml")
+    masses = {ddtrack.prepare(scenario, seed=s)[0].plant_params.mass for s in range(20)}
+    assert len(masses) == 20 and all(8.0 <= m <= 12.0 for m in masses)  # uniform +-20 % of 10 kg
+    setup, _ = ddtrack.prepare(scenario, seed=3)
+    assert setup.plant_params.inertia == scenario.plant_params().inertia
+    assert setup.nominal.mass == 10.0  # the controller's belief is not drawn
+
+
+def test_swapping_the_controller_keeps_the_random_draws():
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*_short(2)])
+    other = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml",
+                                  overrides=[*_short(2), "controller.inner=pd"])
+    (_, draws_a), (_, draws_b) = ddtrack.prepare(scenario, seed=1), ddtrack.prepare(other, seed=1)
+    assert np.array_equal(draws_a.disturbance, draws_b.disturbance) and np.array_equal(draws_a.noise, draws_b.noise)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", sorted(SCENARIOS.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_scenario_runs(path):
+    scenario = ddtrack.load_scenario(path)
+    result = ddtrack.run(scenario)
+    assert result.status_name == "ok"
+    columns = ddtrack.timeseries(result)
+    metrics = ddtrack.summarize(columns, status=result.status_name, window=scenario.simulation.window,
+                                control_period=scenario.simulation.control_period,
+                                settling_threshold=scenario.simulation.settling_threshold)
+    assert metrics["e_tr_mean"] < 0.2, metrics  # every shipped case is tracked, under its uncertainty
+
+
+def test_public_api_is_documented():
+    for name in ddtrack.__all__:
+        obj = getattr(ddtrack, name)
+        assert inspect.getdoc(obj), f"ddtrack.{name} has no docstring"
+
+
+def test_ci_runs_the_readme_test_command():
+    readme = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```bash\n(.*?)\n```", readme, flags=re.S)
+    assert len(blocks) >= 2 and "ddtrack run scenarios/paper_line.toml" in blocks[0]
+    test_command = blocks[1].strip()
+    assert "pytest" in test_command
+    ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()
+    assert ci[-1] == test_command
