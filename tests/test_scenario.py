@@ -184,3 +184,18 @@ def test_every_section_rejects_unknown_keys():
             continue
         with pytest.raises(ConfigError, match=rf"^{section}\.bogus: unknown key"):
             validate_scenario({"name": "x", "trajectory": {"kind": "line"}, section: {"bogus": 1}})
+
+
+def test_scenario_reference_documents_every_key():
+    from conftest import ROOT
+    from ddtrack.scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, InitialConfig, NoiseConfig, ParameterDraw
+    from ddtrack.scenario import RobotConfig, SimulationConfig
+
+    text = (ROOT / "docs" / "scenarios.md").read_text()
+    models = [SimulationConfig, RobotConfig, ParameterDraw, NoiseConfig, InitialConfig,
+              *TRAJECTORIES.values(), *DISTURBANCES.values(), *CONTROLLERS.values()]
+    for model in models:
+        for key in model.model_fields:
+            assert f"`{key}`" in text or key == "kind", f"{model.__name__}.{key} is not in docs/scenarios.md"
+    for kind in [*TRAJECTORIES, *DISTURBANCES, *CONTROLLERS]:
+        assert f'kind = "{kind}"' in text
