@@ -44,7 +44,8 @@ def settling_time(t: np.ndarray, e_tr: np.ndarray, threshold: float) -> float | 
 
 def effort(tau_r: np.ndarray, tau_l: np.ndarray, control_period: float) -> float | None:
     """Integral of tau_R^2 + tau_L^2 over the run [N^2 m^2 s] (exact under the zero-order hold)."""
-    total = float(np.sum(np.asarray(tau_r) ** 2 + np.asarray(tau_l) ** 2) * control_period)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported as None, not a warning
+        total = float(np.sum(np.asarray(tau_r) ** 2 + np.asarray(tau_l) ** 2) * control_period)
     return total if math.isfinite(total) else None
 
 

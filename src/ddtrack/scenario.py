@@ -267,7 +267,7 @@ class CircleTrajectory(_Section):
 
 
 class FigureEightTrajectory(_Section):
-    """Lemniscate of Gerono (the speed varies between size*w and sqrt(2)*size*w, w = 2 pi / period)."""
+    """Lemniscate of Gerono (speed between 0.66*size*w and 1.41*size*w, w = 2 pi / period: it never stops)."""
 
     kind: Literal["figure_eight"]
     center: Pair = Field((0.0, 0.0), description="Crossing point [m].")

@@ -15,6 +15,9 @@ from .integrators import rk4
 from .result import SimResult
 
 
+SCAN_UNROLL = 4
+
+
 class Draws(NamedTuple):
     """The run's randomness, drawn before it from one seed (so the run itself is deterministic)."""
 
@@ -89,7 +92,8 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
 
     steps = jnp.arange(n_steps)
     carry0 = (x0, memory0, jnp.asarray(0), jnp.asarray(-1))
+    # unroll=4: a third less per-step loop overhead on CPU at no compile cost (docs/benchmarks.md)
     (_, _, status, failure_index), (states, refs, errors, controls, logs) = jax.lax.scan(
-        period, carry0, (steps, draws.disturbance, draws.noise)
+        period, carry0, (steps, draws.disturbance, draws.noise), unroll=SCAN_UNROLL
     )
     return SimResult(steps * control_period, states, refs, errors, controls, logs, status, failure_index)

@@ -46,7 +46,7 @@ class FigureEight(ParametricCurve):
     """Lemniscate of Gerono, p = center + size [sin(2 pi t / period), sin(4 pi t / period) / 2].
 
     ``size`` is the half-width [m]; both lobes take ``period`` [s]. With w = 2 pi / period the speed
-    varies between size*w (at the lobe tips) and sqrt(2)*size*w (at the crossing): it never stops.
+    varies between sqrt(7)/4*size*w (where cos^2(wt) = 3/8) and sqrt(2)*size*w (at the crossing): it never stops.
     """
 
     center: Array = (0.0, 0.0)

@@ -1,0 +1,165 @@
+"""Metrics (SPEC 4.4, 6.26, 6.27): statistics on synthetic arrays with hand-computed answers, summaries
+of failed runs, and zero steady error without uncertainty."""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ddtrack
+from ddtrack.controllers import Backstepping, Cascade, ComputedTorque
+from ddtrack.metrics import effort, improvement, saturation_fraction, settling_time, summarize, window_statistics
+from ddtrack.model import DynamicPlant, RobotParams
+from ddtrack.sim import Draws, simulate
+from ddtrack.trajectories import Line
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+# --- item 26 ----------------------------------------------------------------------------------------
+
+
+def test_improvement_reproduces_the_paper():
+    assert round(improvement(0.0547, 0.0216), 2) == 60.51  # 60.5119...
+    assert round(improvement(0.0976, 0.0468), 2) == 52.05  # 52.0492 (the paper truncates to 52.04)
+    assert improvement(0.0976, 0.0468) == pytest.approx(100 * (0.0976 - 0.0468) / 0.0976, rel=1e-15)
+
+
+def test_improvement_sign_and_bad_baseline():
+    assert improvement(0.1, 0.1) == 0.0
+    assert improvement(0.1, 0.15) == pytest.approx(-50.0)  # worse than the baseline: negative
+    assert improvement(0.2, 0.0) == 100.0
+    for baseline in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError):
+            improvement(baseline, 0.01)
+
+
+# --- window statistics, settling, effort, saturation ------------------------------------------------
+
+
+def test_window_statistics_by_hand():
+    t = np.arange(10) * 0.1  # 0.30000000000000004 etc.: the window edges need the tolerance
+    e = np.array([9.0, 9.0, 9.0, 3.0, 4.0, 0.0, 5.0, 9.0, 9.0, 9.0])
+    stats = window_statistics(t, e, (0.3, 0.6))  # samples 3..6: 3, 4, 0, 5
+    assert stats["e_tr_mean"] == pytest.approx(3.0, rel=1e-15)
+    assert stats["e_tr_rms"] == pytest.approx(math.sqrt((9 + 16 + 0 + 25) / 4), rel=1e-15)
+    assert stats["e_tr_max"] == 5.0
+    assert stats["e_tr_final"] == 5.0
+    whole = window_statistics(t, e, (0.0, 0.9))
+    assert whole["e_tr_mean"] == pytest.approx(e.mean(), rel=1e-15) and whole["e_tr_final"] == 9.0
+
+
+def test_window_statistics_empty_window():
+    t = np.arange(10) * 0.1
+    stats = window_statistics(t, np.ones(10), (2.0, 3.0))
+    assert stats == {"e_tr_mean": None, "e_tr_rms": None, "e_tr_max": None, "e_tr_final": None}
+
+
+def test_settling_time_by_hand():
+    t = np.arange(6) * 0.5
+    # last sample at or above 0.1 is index 3 (0.2): settled from index 4 on
+    assert settling_time(t, np.array([0.5, 0.3, 0.05, 0.2, 0.05, 0.01]), 0.1) == 2.0
+    # a sample equal to the threshold is not "below" it
+    assert settling_time(t, np.array([0.5, 0.05, 0.05, 0.1, 0.05, 0.01]), 0.1) == 2.0
+    # never settles: the last sample is above
+    assert settling_time(t, np.array([0.5, 0.05, 0.05, 0.05, 0.05, 0.2]), 0.1) is None
+    # always settled: the first sample time (t need not start at 0)
+    assert settling_time(t + 3.0, np.full(6, 0.01), 0.1) == 3.0
+
+
+def test_effort_by_hand():
+    tau_r, tau_l = np.array([1.0, 2.0, 3.0]), np.array([0.0, 1.0, -1.0])
+    # (1 + 0) + (4 + 1) + (9 + 1) = 16 N^2 m^2, times T_c = 0.1 s (exact under the ZOH)
+    assert effort(tau_r, tau_l, 0.1) == pytest.approx(1.6, rel=1e-15)
+    assert effort(np.array([1.0, np.nan]), np.zeros(2), 0.1) is None
+    with np.errstate(over="ignore"):
+        assert effort(np.array([1e200, 1e200]), np.zeros(2), 0.1) is None  # overflow to inf
+
+
+def test_saturation_fraction_by_hand():
+    assert saturation_fraction(np.array([0.0, 1.0, 1.0, 0.0])) == 0.5
+    assert saturation_fraction(np.array([1.0, 0.0, 0.0, 0.0, 0.0])) == 0.2
+    assert saturation_fraction(np.zeros(7)) == 0.0
+
+
+def test_summarize_ok_run_by_hand():
+    t = np.arange(6) * 0.5
+    columns = {"t": t, "e_tr": np.array([0.5, 0.3, 0.05, 0.2, 0.05, 0.01]),
+               "tau_r": np.ones(6), "tau_l": -np.ones(6), "saturated": np.array([1.0, 1.0, 0, 0, 0, 0]),
+               "kx": np.full(6, 1.0), "ky": np.full(6, 55.0), "ktheta": np.full(6, 15.0)}
+    metrics = summarize(columns, status="ok", window=(1.0, 2.5), control_period=0.5, settling_threshold=0.1)
+    assert metrics["status"] == "ok" and metrics["window"] == [1.0, 2.5]
+    assert metrics["e_tr_mean"] == pytest.approx((0.05 + 0.2 + 0.05 + 0.01) / 4, rel=1e-14)
+    assert metrics["e_tr_max"] == 0.2 and metrics["e_tr_final"] == 0.01
+    assert metrics["settling_time"] == 2.0
+    assert metrics["effort"] == pytest.approx(6.0, rel=1e-15)  # 6 rows * 2 N^2 m^2 * 0.5 s
+    assert metrics["saturation_fraction"] == pytest.approx(1 / 3)
+    assert metrics["final_gains"] == [1.0, 55.0, 15.0]
+    json.dumps(metrics, allow_nan=False)
+
+
+def test_summarize_failed_run_is_null_and_valid_json():
+    """A real failed run (absurd outer gains, clamps off): statistics are null, the failure time is kept."""
+    trajectory = Line(start=(0.2, 0.1), heading=0.9, speed=0.5)
+    controller = Cascade(Backstepping(kx=1e4, ky=1e7, ktheta=1e4, max_velocity=1e9, max_yaw_rate=1e9),
+                         ComputedTorque(RobotParams(max_torque=1e9)))
+    ref0 = trajectory(0.0)
+    x0 = jnp.asarray([float(ref0.x), float(ref0.y) + 0.5, float(ref0.theta) + 0.3, 0.0, 0.0])
+    n = 2000
+    result = simulate(DynamicPlant(RobotParams(max_torque=1e9)), controller, trajectory, x0, Draws.zeros(n),
+                      n_steps=n, control_period=0.01)
+    assert result.status_name in ("diverged", "non_finite")
+    columns = ddtrack.timeseries(result)
+    metrics = summarize(columns, status=result.status_name, window=(0.0, 20.0), control_period=0.01,
+                        settling_threshold=0.1, failure_time=result.failure_time)
+    for key in ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction"):
+        assert metrics[key] is None, key
+    assert metrics["status"] == result.status_name
+    assert metrics["failure_time"] == result.failure_time and metrics["failure_time"] is not None
+    text = json.dumps(metrics, allow_nan=False)  # must not raise: no NaN/inf anywhere
+    assert json.loads(text)["e_tr_mean"] is None
+
+
+def test_summarize_failed_run_with_non_finite_columns():
+    """Even when the recorded columns hold NaN and inf (the failing row), the summary is valid JSON."""
+    columns = {"t": np.array([0.0, 0.01]), "e_tr": np.array([0.1, np.nan]), "tau_r": np.array([1.0, np.inf]),
+               "tau_l": np.array([1.0, np.nan]), "saturated": np.zeros(2),
+               "kx": np.array([1.0, np.nan]), "ky": np.array([55.0, 55.0]), "ktheta": np.array([15.0, 15.0])}
+    metrics = summarize(columns, status="non_finite", window=(0.0, 0.01), control_period=0.01,
+                        settling_threshold=0.1, failure_time=0.01)
+    assert metrics["e_tr_mean"] is None and metrics["effort"] is None
+    assert metrics["final_gains"] is None  # a NaN gain is not reported as a number
+    json.dumps(metrics, allow_nan=False)
+
+
+# --- item 27 ----------------------------------------------------------------------------------------
+
+
+def test_no_uncertainty_gives_zero_steady_error():
+    """The paper's line with plant = robot, no friction, no disturbance, the paper's clamps and torque
+    limit, starting 0.05 m off the line at rest: no clamp ever acts and e_tr -> 0."""
+    data = tomllib.loads((SCENARIOS / "paper_line.toml").read_text())
+    data.pop("plant")  # every plant key takes the [robot] value
+    data.pop("disturbance")  # none
+    heading = data["trajectory"]["heading"]
+    data["initial"]["pose"] = [-0.05 * math.sin(heading), 0.05 * math.cos(heading), heading]  # 5 cm to the left
+    scenario = ddtrack.validate_scenario(data)
+    assert scenario.plant_params() == scenario.robot.params()
+    assert scenario.plant_params().viscous_friction == 0.0 and scenario.disturbance.kind == "none"
+    result = ddtrack.run(scenario)
+    columns = ddtrack.timeseries(result)
+    assert result.status_name == "ok"
+    assert columns["e_tr"][0] == pytest.approx(0.05, rel=1e-12)
+    np.testing.assert_array_equal(columns["saturated"], 0.0)  # no clamp acts anywhere
+    metrics = summarize(columns, status="ok", window=(20.0, 40.0), control_period=0.01, settling_threshold=0.1)
+    # SPEC 6.27: after the transient the error is below 1e-6 (slowest pole Kx = 1: ~5e-2 e^-20 ~ 1e-10)
+    assert metrics["e_tr_max"] < 1e-6
+    assert metrics["saturation_fraction"] == 0.0
+    # within 0.1 m from the start (settled at t = 0); within 1e-6 m after a finite transient, before 20 s
+    assert np.max(columns["e_tr"]) < 0.1 and metrics["settling_time"] == 0.0
+    assert 5.0 < settling_time(columns["t"], columns["e_tr"], 1e-6) < 20.0
