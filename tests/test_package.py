@@ -22,7 +22,7 @@ LAYERS = [
     {"model", "trajectories"},
     {"controllers"},
     {"sim"},
-    {"scenario", "metrics"},
+    {"scenario", "metrics", "identification"},
     {"runner", "plotting"},
     {"rundir", "report", "envs", "sweep"},
     {"cli"},

@@ -37,3 +37,11 @@ def error_rates(error: Array, v: Array, omega: Array, v_r: Array, omega_r: Array
         -omega * e_x + v_r * jnp.sin(e_theta),
         omega_r - omega,
     ])
+
+
+def body_increment(pose: Array, next_pose: Array) -> Array:
+    """One-step pose increment in the body frame of ``pose`` (SPEC 3.7, emulator E1 target):
+    [c dx + s dy, -s dx + c dy, wrap(theta' - theta)]."""
+    c, s = jnp.cos(pose[2]), jnp.sin(pose[2])
+    dx, dy = next_pose[0] - pose[0], next_pose[1] - pose[1]
+    return jnp.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(next_pose[2] - pose[2])])

@@ -11,8 +11,9 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from .identification import identify
 from .model import DynamicPlant, RobotParams
-from .scenario import ParameterDraw, Scenario, Setup, build
+from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import Draws, SimResult, simulate
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
@@ -47,14 +48,33 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
 def prepare(scenario: Scenario, *, seed: int | None = None) -> tuple[Setup, Draws]:
     """Build the run's objects and draw all of its randomness from ``seed`` (default the scenario's)."""
     keys = streams(scenario.simulation.seed if seed is None else seed)
-    setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]))
+    k_build, k_identify, k_run = jax.random.split(keys["controller"], 3)
+    setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
+    config = scenario.controller
+    if isinstance(config, NNAdaptiveConfig) and config.identification:
+        setup = with_identification(scenario, setup, k_identify)
     n = scenario.simulation.n_steps
     draws = Draws(
         disturbance=jax.random.normal(keys["disturbance"], (n, 2)),
         noise=jax.random.normal(keys["noise"], (n, 5)),
-        controller_key=keys["controller"],
+        controller_key=k_run,
     )
     return setup, draws
+
+
+def with_identification(scenario: Scenario, setup: Setup, key: jax.Array) -> Setup:
+    """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
+    (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
+    config, sim = scenario.controller, scenario.simulation
+    outer = setup.controller.outer
+    result = identify(
+        setup.plant_params, setup.controller.inner, outer.emulator, key, duration=config.identification_duration,
+        epochs=config.epochs, control_period=sim.control_period, substeps=sim.substeps, dither=config.dither,
+        gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate), learning_rate=config.learning_rate,
+        momentum=config.momentum, clip_norm=config.gradient_clip, disturbance=setup.disturbance, noise=setup.noise,
+    )
+    controller = dataclasses.replace(setup.controller, outer=dataclasses.replace(outer, emulator=result.emulator))
+    return dataclasses.replace(setup, controller=controller, identification=result)
 
 
 def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:

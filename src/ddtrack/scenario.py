@@ -21,7 +21,17 @@ import jax
 import jax.numpy as jnp
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from .controllers import Backstepping, Cascade, ComputedTorque, WheelPD
+from .controllers import (
+    Backstepping,
+    Cascade,
+    ComputedTorque,
+    Emulator,
+    NNAdaptiveBackstepping,
+    WheelPD,
+    emulator_scales,
+    init_mlp,
+    one_step_coefficient,
+)
 from .errors import ConfigError, did_you_mean
 from .model import MeasurementNoise, RobotParams, WheelDisturbance
 from .trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square
@@ -383,7 +393,7 @@ class InitialConfig(_Section):
 class BacksteppingConfig(_Section):
     """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
 
-    kind: Literal["backstepping"] = "backstepping"
+    kind: Literal["backstepping"]
     gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
     inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
@@ -399,16 +409,90 @@ class BacksteppingConfig(_Section):
             raise FieldError("strict", "strict = true needs inner = \"computed_torque\" (the cross term enters eq. 11)")
         return self
 
-    def build(self, nominal: RobotParams, control_period: float) -> Cascade:
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
         kx, ky, ktheta = self.gains
         outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
                              max_yaw_rate=self.max_yaw_rate, strict=self.strict)
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
+    def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
         if self.inner == "computed_torque":
-            return Cascade(outer, ComputedTorque(nominal, kc=self.kc))
-        return Cascade(outer, WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period))
+            return ComputedTorque(nominal, kc=self.kc)
+        return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
+
+    def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
+        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (SPEC 2.5, 2.6)."""
+        if self.inner == "computed_torque":
+            return self.kc
+        r2 = nominal.wheel_radius**2
+        return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
 
 
-ControllerConfig = BacksteppingConfig
+PositiveTriple = tuple[Positive, Positive, Positive]
+
+
+class NNAdaptiveConfig(BacksteppingConfig):
+    """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (SPEC 3)."""
+
+    kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
+    rates: tuple[NonNegative, NonNegative, NonNegative] = Field((200.0, 200.0, 200.0), description=(
+        "Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."))
+    gain_momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.0, description="beta_K, momentum of the gains.")
+    max_step: PositiveTriple = Field((0.05, 5.0, 0.5), description="Largest gain change per control period.")
+    gain_min: PositiveTriple = Field((0.1, 1.0, 0.1), description="Lower gain bounds (Kx, Ky, Ktheta).")
+    gain_max: PositiveTriple = Field((10.0, 600.0, 60.0), description="Upper gain bounds (Kx, Ky, Ktheta).")
+    gate_error: Positive = Field(0.5, description="Gains adapt only while e_tr is below this [m].")
+    leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
+    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field((1.0, 50.0, 1.0), description=(
+        "Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta)."))
+    jacobian: Literal["network", "analytic", "quasi_static"] = Field("network", description=(
+        "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, or quasi-static."))
+    error_jacobian: Literal["exact", "paper"] = Field("exact", description=(
+        "d e_p / d q: exact (SPEC 3.3) or the paper's approximation -T_e."))
+    emulator: Literal["E1", "E0"] = Field("E1", description=(
+        "E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c)."))
+    hidden_units: int = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
+    learning_rate: Positive = Field(0.2, description="Emulator backpropagation rate eta.")
+    momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.3, description="Emulator momentum beta.")
+    gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
+    online_learning: bool = Field(True, description="Train the emulator on every new sample.")
+    structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
+    identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
+    identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
+    epochs: int = Field(100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data.")
+    dither: tuple[NonNegative, NonNegative] = Field((0.05, 0.1), description=(
+        "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run."))
+    freeze_time: NonNegative | None = Field(None, description=(
+        "No gain change before this time [s]; default 0 with identification, 2 without."))
+
+    @model_validator(mode="after")
+    def _gains_inside_bounds(self) -> NNAdaptiveConfig:
+        for name, low, gain, high in zip(("Kx", "Ky", "Ktheta"), self.gain_min, self.gains, self.gain_max, strict=True):
+            if not low <= gain <= high:
+                raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller with a freshly initialised emulator (its identification is done by the runner)."""
+        uses_velocity = self.emulator == "E1"
+        emulator = Emulator(init_mlp(key, 4 if uses_velocity else 2, self.hidden_units, 3),
+                            emulator_scales(control_period, uses_velocity=uses_velocity), uses_velocity)
+        bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
+        freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
+        outer = NNAdaptiveBackstepping(
+            gains=self.gains, emulator=emulator, control_period=control_period,
+            analytic_coefficients=one_step_coefficient(bandwidth, control_period), rates=self.rates,
+            gain_momentum=self.gain_momentum, max_step=self.max_step, gain_min=self.gain_min, gain_max=self.gain_max,
+            gate_error=self.gate_error, leakage=self.leakage, gamma=self.gamma, learning_rate=self.learning_rate,
+            momentum=self.momentum, clip_norm=self.gradient_clip, freeze_time=freeze, max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate, jacobian=self.jacobian, error_jacobian=self.error_jacobian,
+            online_learning=self.online_learning, structured_jacobian=self.structured_jacobian, strict=self.strict,
+        )
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
+
+ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig], Field(discriminator="kind")]
 
 
 # --- the scenario --------------------------------------------------------------------------------
@@ -427,7 +511,7 @@ class Scenario(_Section):
     noise: NoiseConfig = NoiseConfig()
     trajectory: TrajectoryConfig
     initial: InitialConfig = InitialConfig()
-    controller: ControllerConfig = BacksteppingConfig()
+    controller: ControllerConfig = BacksteppingConfig(kind="backstepping")
 
     @model_validator(mode="after")
     def _draws_keep_parameters_physical(self) -> Scenario:
@@ -518,6 +602,9 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
 
 def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Scenario:
     """Validate a scenario given as a dict; relative waypoint files are read from ``base_dir``."""
+    controller = data.get("controller")
+    if isinstance(controller, dict) and "kind" not in controller:  # a [controller] without kind is backstepping
+        data = {**data, "controller": {"kind": "backstepping", **controller}}
     try:
         # JSON mode + strict: TOML arrays become tuples, ints become floats, but "10" and true are not numbers
         text = json.dumps(data, default=str, allow_nan=True)
@@ -622,10 +709,13 @@ class Setup:
     x0: jax.Array
     disturbance: WheelDisturbance
     noise: MeasurementNoise
+    identification: Any = None  #: the emulator's identification, for controllers that have one
 
 
-def build(scenario: Scenario, plant_params: RobotParams | None = None) -> Setup:
-    """Build the runtime objects; ``plant_params`` replaces the plant (e.g. a random draw)."""
+def build(scenario: Scenario, plant_params: RobotParams | None = None,
+          controller_key: jax.Array | None = None) -> Setup:
+    """Build the runtime objects; ``plant_params`` replaces the plant (e.g. a random draw) and
+    ``controller_key`` seeds the controller's construction (e.g. the emulator's initial weights)."""
     nominal = scenario.robot.params()
     sim = scenario.simulation
     trajectory = scenario.trajectory.build()
@@ -638,7 +728,8 @@ def build(scenario: Scenario, plant_params: RobotParams | None = None) -> Setup:
     return Setup(
         nominal=nominal,
         plant_params=plant_params if plant_params is not None else scenario.plant_params(),
-        controller=scenario.controller.build(nominal, sim.control_period),
+        controller=scenario.controller.build(nominal, sim.control_period,
+                                             controller_key if controller_key is not None else jax.random.PRNGKey(0)),
         trajectory=trajectory,
         x0=x0,
         disturbance=scenario.disturbance.build(),

@@ -1,9 +1,23 @@
 """Controllers: the protocol, inner loops and Kanayama backstepping (SPEC 2)."""
 from .backstepping import Backstepping, clamp_command, kanayama_command, kanayama_command_rate, lyapunov
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw
+from .dither import Dithered
 from .inner import ComputedTorque, WheelPD
+from .nn import MLP, Scales, init_mlp
+from .nn_adaptive import (
+    AdaptiveMemory,
+    Emulator,
+    NNAdaptiveBackstepping,
+    cost_gradient,
+    emulator_scales,
+    error_jacobian_body,
+    gain_sensitivity,
+    one_step_coefficient,
+)
 
 __all__ = [
+    "MLP", "AdaptiveMemory", "Dithered", "Emulator", "NNAdaptiveBackstepping", "Scales", "cost_gradient",
+    "emulator_scales", "error_jacobian_body", "gain_sensitivity", "init_mlp", "one_step_coefficient",
     "Backstepping", "Cascade", "ComputedTorque", "Controller", "Logs", "TorqueLaw", "VelocityCommand", "VelocityLaw",
     "WheelPD", "clamp_command", "kanayama_command", "kanayama_command_rate", "lyapunov",
 ]

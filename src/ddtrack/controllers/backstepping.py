@@ -83,6 +83,9 @@ class Backstepping:
         logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2]}
         return VelocityCommand(nu_c, nu_c_dot, feedback, saturated), memory, logs
 
+    def observe(self, memory: tuple[()], saturated: Array) -> tuple[()]:
+        return memory
+
     def step(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[Array, tuple[()], Logs]:
         command, memory, logs = self.command(t, y, ref, memory)
         return command.nu_c, memory, {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1],

@@ -42,6 +42,9 @@ class VelocityLaw(Protocol):
 
     def command(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[VelocityCommand, Any, Logs]: ...
 
+    def observe(self, memory: Any, saturated: Array) -> Any:
+        """Told after the inner loop whether this period saturated (1.0) or not; returns the memory."""
+
 
 class TorqueLaw(Protocol):
     def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
@@ -67,10 +70,7 @@ class Cascade:
         outer_memory, inner_memory = memory
         command, outer_memory, outer_logs = self.outer.command(t, y, ref, outer_memory)
         tau, torque_saturated, inner_memory = self.inner.torque(y, command, inner_memory)
-        logs = {
-            "v_cmd": command.nu_c[0],
-            "omega_cmd": command.nu_c[1],
-            "saturated": jnp.maximum(command.saturated, torque_saturated),
-            **outer_logs,
-        }
+        saturated = jnp.maximum(command.saturated, torque_saturated)
+        outer_memory = self.outer.observe(outer_memory, saturated)
+        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": saturated, **outer_logs}
         return tau, (outer_memory, inner_memory), logs

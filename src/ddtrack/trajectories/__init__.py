@@ -2,8 +2,9 @@
 from .base import ParametricCurve, Reference, Trajectory
 from .curves import Circle, FigureEight, Line, Sinusoid
 from .paths import PiecewisePath, polyline_path, square
+from .sampled import SampledTrajectory, unicycle_reference
 
 __all__ = [
-    "Circle", "FigureEight", "Line", "ParametricCurve", "PiecewisePath", "Reference", "Sinusoid", "Trajectory",
-    "polyline_path", "square",
+    "Circle", "FigureEight", "Line", "ParametricCurve", "PiecewisePath", "Reference", "SampledTrajectory", "Sinusoid",
+    "Trajectory", "polyline_path", "square", "unicycle_reference",
 ]

@@ -1,0 +1,194 @@
+"""NN-adaptive backstepping: Kanayama gains tuned online by gradient descent through the Jacobian of
+an emulator network that learns the robot (the paper's contribution; SPEC 3, pseudo-code 3.8).
+
+One control period (SPEC 3.8)::
+
+    e        = posture_error(y_k, ref_k)
+    emulator <- one momentum-SGD step on the last transition (z_{k-1}, body_increment(q_{k-1}, q_k))
+    if gate (|e_xy| < e_gate, no saturation at k-1, t >= freeze_time):
+        g     = (Gamma e) D_b J_b^n Phi                      eqs. 22-25, 34 corrected
+        dA    = clip(-T_c Lambda g + beta_K dA_prev - T_c sigma (A - A_0), +-dA_max)
+        A     = clip(A + dA, A_min, A_max)
+    nu_c     = clamp(kanayama(e, ref, A)),  nu_c_dot analytic   eq. 12, SPEC 2.5
+    z_k      = [nu_c, nu_k]                                  the emulator's next training input
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass, static_field
+from ..geometry import body_increment, posture_error
+from ..trajectories import Reference
+from .backstepping import clamp_command, kanayama_command, kanayama_command_rate
+from .base import Logs, VelocityCommand
+from .nn import MLP, Scales, backprop, input_jacobian, momentum_step, sample_loss, zeros_like
+
+JACOBIANS = ("network", "analytic", "quasi_static")
+ERROR_JACOBIANS = ("exact", "paper")
+
+
+@pytree_dataclass
+class Emulator:
+    """The network and its fixed scales. E1 (``uses_velocity``): input [v_c, omega_c, v, omega];
+    E0: input [v_c, omega_c]. Output: the body-frame one-step pose increment (SPEC 3.7)."""
+
+    mlp: MLP
+    scales: Scales
+    uses_velocity: bool = static_field(default=True)
+
+    def inputs(self, nu_c: Array, nu: Array) -> Array:
+        return jnp.concatenate([nu_c, nu]) if self.uses_velocity else nu_c
+
+
+def emulator_scales(control_period: float, *, uses_velocity: bool, max_velocity: float = 1.0,
+                    max_yaw_rate: float = 2.0) -> Scales:
+    """s_z = [v_max, w_max(, v_max, w_max)], s_y = [T_c v_max, 0.05 T_c v_max, T_c w_max] (SPEC 3.7)."""
+    inputs = [max_velocity, max_yaw_rate] * (2 if uses_velocity else 1)
+    tv = control_period * max_velocity
+    return Scales(inputs=jnp.asarray(inputs, float),
+                  outputs=jnp.asarray([tv, 0.05 * tv, control_period * max_yaw_rate], float))
+
+
+def one_step_coefficient(bandwidth: Array, control_period: float) -> Array:
+    """c = T_c - (1 - exp(-k T_c)) / k: displacement per sample per unit command for an inner loop of
+    bandwidth k [1/s] (SPEC 3.4 (a), the consistent reading of the paper's eqs. 27-31)."""
+    return control_period - (1.0 - jnp.exp(-bandwidth * control_period)) / bandwidth
+
+
+def error_jacobian_body(error: Array, exact: bool) -> Array:
+    """D_b = D R_3(theta) = [[-1, 0, e_y], [0, -1, -e_x], [0, 0, -1]] (SPEC 3.3); the paper's
+    D ~ -T_e gives -I."""
+    if not exact:
+        return -jnp.eye(3)
+    return jnp.array([[-1.0, 0.0, error[1]], [0.0, -1.0, -error[0]], [0.0, 0.0, -1.0]])
+
+
+def gain_sensitivity(error: Array, ref: Reference) -> Array:
+    """Phi = d nu_c / d(Kx, Ky, Ktheta) = [[e_x, 0, 0], [0, v_r e_y, v_r sin e_th]] (eq. 24 corrected)."""
+    zero = jnp.zeros_like(error[0])
+    return jnp.array([[error[0], zero, zero], [zero, ref.v * error[1], ref.v * jnp.sin(error[2])]])
+
+
+def cost_gradient(error: Array, ref: Reference, gamma: Array, plant_jacobian_body: Array, exact: bool) -> Array:
+    """dJ/dalpha = e^T Gamma D_b J_b Phi for J = e^T Gamma e / 2 (eqs. 22-23, SPEC 3.1, 3.5 generic form)."""
+    return (gamma * error) @ error_jacobian_body(error, exact) @ plant_jacobian_body @ gain_sensitivity(error, ref)
+
+
+class AdaptiveMemory(NamedTuple):
+    gains: Array  #: current (Kx, Ky, Ktheta)
+    last_step: Array  #: previous gain change, for the gain momentum
+    mlp: MLP  #: emulator weights
+    mlp_velocity: MLP  #: their momentum
+    previous_pose: Array  #: measured pose at k-1
+    previous_input: Array  #: emulator input z_{k-1}
+    previous_saturated: Array  #: 1.0 if a clamp or the torque limit acted at k-1
+    started: Array  #: 1.0 once a transition exists to learn from
+
+
+@pytree_dataclass
+class NNAdaptiveBackstepping:
+    """Kanayama law whose gains adapt online through the emulator's Jacobian (SPEC 3).
+
+    In: measured state y and reference. Out: nu_c = (v_c [m/s], omega_c [rad/s]), clamped, with its
+    analytic derivative; composed with an inner loop in a :class:`~ddtrack.controllers.Cascade`.
+    With ``rates`` = 0 it is the backstepping controller exactly. Logs: ``kx, ky, ktheta``,
+    ``emulator_loss`` (normalised sample loss of the online step), ``jacobian_v`` and ``jacobian_omega``
+    (normalised J_b[0, 0] and J_b[2, 1] used by the gain law) and ``gate`` (1.0 when the gains moved).
+    """
+
+    gains: Array  #: initial (Kx, Ky, Ktheta)
+    emulator: Emulator
+    control_period: float
+    analytic_coefficients: Array  #: (c_v, c_omega) of SPEC 3.4 (a) for the nominal inner loop
+    rates: Array = (200.0, 200.0, 200.0)  #: Lambda [1/s], with the normalised Jacobian
+    gain_momentum: float = 0.0  #: beta_K
+    max_step: Array = (0.05, 5.0, 0.5)  #: per-sample clip of the gain change
+    gain_min: Array = (0.1, 1.0, 0.1)
+    gain_max: Array = (10.0, 600.0, 60.0)
+    gate_error: float = 0.5  #: [m]
+    leakage: float = 0.0  #: sigma [1/s], pull towards the initial gains
+    gamma: Array = (1.0, 50.0, 1.0)  #: Gamma of eq. 22
+    learning_rate: float = 0.2  #: emulator eta
+    momentum: float = 0.3  #: emulator beta
+    clip_norm: float = 5.0  #: emulator gradient-norm clip
+    freeze_time: float = 0.0  #: [s] no gain change before
+    max_velocity: float = 2.0
+    max_yaw_rate: float = 4.0
+    jacobian: str = static_field(default="network")
+    error_jacobian: str = static_field(default="exact")
+    online_learning: bool = static_field(default=True)
+    structured_jacobian: bool = static_field(default=False)
+    strict: bool = static_field(default=False)
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> AdaptiveMemory:
+        x0 = jnp.asarray(x0, float)
+        gains = jnp.asarray(self.gains, float)
+        n_in = self.emulator.scales.inputs.shape[0]
+        return AdaptiveMemory(gains, jnp.zeros(3), self.emulator.mlp, zeros_like(self.emulator.mlp), x0[:3],
+                              jnp.zeros(n_in), jnp.asarray(0.0), jnp.asarray(0.0))
+
+    def _plant_jacobian(self, mlp: MLP, nu_c: Array, nu: Array) -> Array:
+        """Body-frame J_b^n (3x2) of the configured source, normalised by c_bar (SPEC 3.4)."""
+        c_v, c_w = jnp.asarray(self.analytic_coefficients)[0], jnp.asarray(self.analytic_coefficients)[1]
+        if self.jacobian == "quasi_static":
+            return jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])  # T_c S / T_c
+        if self.jacobian == "analytic":
+            return jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, c_w / c_v]])
+        emulator = Emulator(mlp, self.emulator.scales, self.emulator.uses_velocity)
+        jb = input_jacobian(mlp, emulator.scales, emulator.inputs(nu_c, nu))[:, :2] / c_v
+        if self.structured_jacobian:  # keep the two direct channels, positive (SPEC 3.7 safeguards)
+            jb = jnp.array([[jnp.maximum(jb[0, 0], 0.0), 0.0], [0.0, 0.0], [0.0, jnp.maximum(jb[2, 1], 0.0)]])
+        return jb
+
+    def command(self, t: Array, y: Array, ref: Reference, memory: AdaptiveMemory
+                ) -> tuple[VelocityCommand, AdaptiveMemory, Logs]:
+        error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+        nu = y[3:5]
+        scales, started = self.emulator.scales, memory.started > 0.5
+
+        # learn the last transition
+        z_prev = memory.previous_input / scales.inputs
+        target = body_increment(memory.previous_pose, y[:3]) / scales.outputs
+        loss = jnp.where(started, sample_loss(memory.mlp, z_prev, target), 0.0)
+        mlp, mlp_velocity = memory.mlp, memory.mlp_velocity
+        if self.online_learning:
+            trained, velocity = momentum_step(mlp, mlp_velocity, backprop(mlp, z_prev, target),
+                                              learning_rate=self.learning_rate, momentum=self.momentum,
+                                              clip_norm=self.clip_norm)
+            keep = lambda new, old: jnp.where(started, new, old)  # noqa: E731
+            mlp, mlp_velocity = jax.tree_util.tree_map(keep, trained, mlp), jax.tree_util.tree_map(
+                keep, velocity, mlp_velocity)
+
+        # adapt the gains (eqs. 22-26)
+        limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
+        gains = memory.gains
+        nu_c_now = jnp.clip(kanayama_command(error, ref, gains), -limits, limits)
+        jb = self._plant_jacobian(mlp, nu_c_now, nu)
+        gradient = cost_gradient(error, ref, jnp.asarray(self.gamma), jb, self.error_jacobian == "exact")
+        gate = (started & (jnp.hypot(error[0], error[1]) < self.gate_error) & (memory.previous_saturated < 0.5)
+                & (t >= self.freeze_time))
+        initial = jnp.asarray(self.gains, float)
+        step = (-self.control_period * jnp.asarray(self.rates) * gradient + self.gain_momentum * memory.last_step
+                - self.control_period * self.leakage * (gains - initial))
+        step = jnp.where(gate, jnp.clip(step, -jnp.asarray(self.max_step), jnp.asarray(self.max_step)), 0.0)
+        gains = jnp.clip(gains + step, jnp.asarray(self.gain_min), jnp.asarray(self.gain_max))
+
+        # the Kanayama command with the new gains
+        nu_c = kanayama_command(error, ref, gains)
+        nu_c_dot = kanayama_command_rate(error, nu, ref, gains)
+        nu_c, nu_c_dot, saturated = clamp_command(nu_c, nu_c_dot, limits)
+        feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if self.strict else jnp.zeros(2)
+
+        memory = AdaptiveMemory(gains, step, mlp, mlp_velocity, y[:3], self.emulator.inputs(nu_c, nu),
+                                saturated, jnp.asarray(1.0))
+        logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2], "emulator_loss": loss,
+                "jacobian_v": jb[0, 0], "jacobian_omega": jb[2, 1], "gate": gate.astype(float)}
+        return VelocityCommand(nu_c, nu_c_dot, feedback, saturated), memory, logs
+
+    def observe(self, memory: AdaptiveMemory, saturated: Array) -> AdaptiveMemory:
+        """Record whether the inner loop saturated this period, for the next period's gate."""
+        return memory._replace(previous_saturated=jnp.maximum(memory.previous_saturated, saturated))

@@ -1,0 +1,105 @@
+"""The identification phase of the NN-adaptive controller (SPEC 3.7, "N_c = 100 repeat cycle").
+
+Before an experiment, with its own seed: run the fixed-gain backstepping controller on an exciting
+reference with a small command dither on the *true* plant, collect the transitions
+(z_k = [nu_c(k), nu(k)], body-frame increment of q_k -> q_k+1), and train the emulator for N_c
+shuffled epochs of per-sample backpropagation with momentum.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from .controllers import Backstepping, Cascade, Dithered, Emulator
+from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
+from .geometry import body_increment
+from .model import DynamicPlant, MeasurementNoise, RobotParams, WheelDisturbance
+from .sim import Draws, simulate
+from .trajectories import SampledTrajectory, unicycle_reference
+
+
+class Identification(NamedTuple):
+    """The trained emulator and how well it learned."""
+
+    emulator: Emulator
+    epoch_loss: Array  #: (epochs,) mean normalised sample loss during each epoch
+    nmse: Array  #: (3,) normalised mean squared prediction error per output on the data, after training
+    samples: int
+
+
+def exciting_reference(duration: float, control_period: float) -> SampledTrajectory:
+    """v_r = 0.5 + 0.3 sin 0.3t + 0.1 sin(1.3t + 1), omega_r = 0.4 sin 0.5t + 0.3 sin 1.7t (SPEC 3.7):
+    speeds in [0.1, 0.9] m/s and yaw rates in [-0.7, 0.7] rad/s."""
+    return unicycle_reference(
+        lambda t: 0.5 + 0.3 * jnp.sin(0.3 * t) + 0.1 * jnp.sin(1.3 * t + 1.0),
+        lambda t: 0.4 * jnp.sin(0.5 * t) + 0.3 * jnp.sin(1.7 * t),
+        duration=duration, step=control_period,
+    )
+
+
+def collect(plant: RobotParams, inner: object, emulator: Emulator, key: Array, *, duration: float,
+            control_period: float, substeps: int, dither: Array, gains: Array, limits: Array,
+            disturbance: WheelDisturbance, noise: MeasurementNoise) -> tuple[Array, Array]:
+    """Run the identification experiment; return inputs z (n, n_in) and targets (n, 3) [physical units]."""
+    trajectory = exciting_reference(duration, control_period)
+    outer = Dithered(Backstepping(kx=gains[0], ky=gains[1], ktheta=gains[2], max_velocity=limits[0],
+                                  max_yaw_rate=limits[1]), std=dither)
+    n = round(duration / control_period)
+    k_dist, k_noise, k_ctrl = jax.random.split(key, 3)
+    draws = Draws(jax.random.normal(k_dist, (n, 2)), jax.random.normal(k_noise, (n, 5)), k_ctrl)
+    ref0 = trajectory(0.0)
+    x0 = jnp.stack([ref0.x, ref0.y, ref0.theta, 0.0, 0.0])
+    result = simulate(DynamicPlant(plant), Cascade(outer, inner), trajectory, x0, draws, n_steps=n,
+                      control_period=control_period, substeps=substeps, disturbance=disturbance, noise=noise)
+    nu_c = jnp.stack([result.logs["v_cmd"], result.logs["omega_cmd"]], axis=1)
+    z = jax.vmap(emulator.inputs)(nu_c, result.state[:, 3:5])[:-1]
+    targets = jax.vmap(body_increment)(result.state[:-1, :3], result.state[1:, :3])
+    return z, targets
+
+
+def train(emulator: Emulator, z: Array, targets: Array, key: Array, *, epochs: int, learning_rate: float,
+          momentum: float, clip_norm: float) -> tuple[Emulator, Array]:
+    """``epochs`` shuffled passes of per-sample momentum SGD; returns the emulator and the epoch losses."""
+    zn, tn = z / emulator.scales.inputs, targets / emulator.scales.outputs
+
+    def sample_step(carry, i):
+        mlp, velocity = carry
+        loss = sample_loss(mlp, zn[i], tn[i])
+        mlp, velocity = momentum_step(mlp, velocity, backprop(mlp, zn[i], tn[i]), learning_rate=learning_rate,
+                                      momentum=momentum, clip_norm=clip_norm)
+        return (mlp, velocity), loss
+
+    def epoch(carry, epoch_key):
+        carry, losses = jax.lax.scan(sample_step, carry, jax.random.permutation(epoch_key, zn.shape[0]))
+        return carry, jnp.mean(losses)
+
+    (mlp, _), losses = jax.lax.scan(epoch, (emulator.mlp, zeros_like(emulator.mlp)), jax.random.split(key, epochs))
+    return emulator.__class__(mlp, emulator.scales, emulator.uses_velocity), losses
+
+
+def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
+    """Mean squared error over the variance, per output channel."""
+    predictions = jax.vmap(lambda zi: forward(emulator.mlp, zi / emulator.scales.inputs)[0])(z)
+    predictions = predictions * emulator.scales.outputs
+    return jnp.mean((predictions - targets) ** 2, axis=0) / jnp.var(targets, axis=0)
+
+
+def identify(plant: RobotParams, inner: object, emulator: Emulator, key: Array, *, duration: float = 60.0,
+             epochs: int = 100, control_period: float = 0.01, substeps: int = 10, dither: Array = (0.05, 0.1),
+             gains: Array = (1.0, 55.0, 15.0), limits: Array = (2.0, 4.0), learning_rate: float = 0.2,
+             momentum: float = 0.3, clip_norm: float = 5.0, disturbance: WheelDisturbance = WheelDisturbance(),
+             noise: MeasurementNoise = MeasurementNoise()) -> Identification:
+    """Collect identification data on ``plant`` and train ``emulator`` on it (SPEC 3.7 schedule, step 1)."""
+    k_data, k_train = jax.random.split(key)
+    z, targets = collect(plant, inner, emulator, k_data, duration=duration, control_period=control_period,
+                         substeps=substeps, dither=jnp.asarray(dither, float), gains=jnp.asarray(gains, float),
+                         limits=jnp.asarray(limits, float), disturbance=disturbance, noise=noise)
+    trained, losses = _train_jit(emulator, z, targets, k_train, epochs=epochs, learning_rate=learning_rate,
+                                 momentum=momentum, clip_norm=clip_norm)
+    return Identification(trained, losses, prediction_nmse(trained, z, targets), int(z.shape[0]))
+
+
+_train_jit = jax.jit(train, static_argnames=("epochs",))
