@@ -139,3 +139,55 @@ def test_atomic_write_leaves_no_partial_file(tmp_path):
         atomic_write(target, failing)
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["metrics.json"]  # no temporary left behind
+
+
+def test_adaptive_run_writes_gains_and_identification(tmp_path, cli):
+    out = tmp_path / "nn"
+    code, stdout, _ = cli("run", SCENARIOS / "paper_line.toml", "--controller", "nn_adaptive_backstepping",
+                          "--set", "controller.epochs=5", "--out", out)
+    assert code == 0 and "nn_adaptive_backstepping" in stdout
+    assert (out / "figures" / "gains.png").stat().st_size > 10_000
+    found = json.loads((out / "identification.json").read_text())
+    assert found["epochs"] == 5 and len(found["epoch_loss"]) == 5 and found["samples"] == 5999
+    assert found["epoch_loss"][-1] < found["epoch_loss"][0]  # pre-training learns
+    assert found["nmse"]["forward"] < 1e-2 and found["nmse"]["yaw"] < 1e-2
+    table = pq.read_table(out / "timeseries.parquet")
+    assert {"emulator_loss", "jacobian_v", "jacobian_omega", "gate"} <= set(table.column_names)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["final_gains"] != [1.0, 55.0, 15.0]  # the gains adapted
+
+
+@pytest.mark.slow
+def test_reproduce_writes_table1_and_figures(tmp_path, cli):
+    out = tmp_path / "repro"
+    code, stdout, _ = cli("reproduce", "--seeds", "2", "--out", out)
+    assert code == 0
+    assert "| Case 1: line y = x | backstepping |" in stdout and "60.51" in stdout
+    table = json.loads((out / "table1.json").read_text())
+    assert table["seeds"] == 2 and set(table["cases"]) == {"paper_line", "paper_square"}
+    for name, entry in table["cases"].items():
+        bs, nn = entry["controllers"]["backstepping"], entry["controllers"]["nn_adaptive"]
+        assert len(nn["e_tr_mean"]["values"]) == 2 and nn["e_tr_mean"]["ci_low"] <= nn["e_tr_mean"]["mean"]
+        # the paired improvement is computed from the per-seed values
+        paired = [100 * (b - n) / b for b, n in zip(bs["e_tr_mean"]["values"], nn["e_tr_mean"]["values"])]
+        assert entry["improvement"]["nn_adaptive"]["values"] == pytest.approx(paired)
+        assert entry["improvement"]["nn_adaptive"]["mean"] > 0  # it beats backstepping, as measured
+        assert entry["paper"]["backstepping"] in (0.0547, 0.0976)
+    rows = (out / "table1.csv").read_text().splitlines()
+    assert rows[0] == "case,controller,statistic,mean,ci_low,ci_high,n,paper" and len(rows) == 1 + 2 * (4 + 4 + 1)
+    figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert len(figures) == 8 and "paper_line_gains.png" in figures and "paper_square_path.png" in figures
+    assert (out / "table1.md").read_text().startswith("# Table 1, reproduced (2 seeds")
+
+
+def test_reproduce_exits_1_when_the_adaptive_controller_loses(tmp_path, cli, monkeypatch):
+    import ddtrack.reproduce as reproduce_module
+
+    losing = {"seeds": 1, "elapsed_s": 0.0, "cases": {
+        "paper_line": {"improvement": {"nn_adaptive": {"mean": -3.0}}},
+        "paper_square": {"improvement": {"nn_adaptive": {"mean": 12.0}}},
+    }}
+    monkeypatch.setattr(reproduce_module, "reproduce", lambda out, **_: losing)
+    monkeypatch.setattr(reproduce_module, "table_markdown", lambda table: "table")
+    code, _, stderr = cli("reproduce", "--out", tmp_path / "r")
+    assert code == 1 and "does not beat backstepping on: paper_line" in stderr

@@ -24,7 +24,8 @@ LAYERS = [
     {"sim"},
     {"scenario", "metrics", "identification"},
     {"runner", "plotting"},
-    {"rundir", "report", "envs", "sweep"},
+    {"rundir"},
+    {"reproduce", "report", "envs", "sweep"},
     {"cli"},
 ]
 def _short(seconds: int) -> list[str]:

@@ -55,15 +55,22 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     _enable_compilation_cache()
     from .metrics import summarize
     from .rundir import write_run
-    from .runner import run as run_scenario
+    from .runner import prepare, run_setup
     from .sim import REMEDIES, timeseries
 
-    result = run_scenario(spec)
+    setup, draws = prepare(spec)
+    result = run_setup(spec, setup, draws)
     columns = timeseries(result)
     sim = spec.simulation
     metrics = summarize(columns, status=result.status_name, window=sim.window, control_period=sim.control_period,
                         settling_threshold=sim.settling_threshold, failure_time=result.failure_time)
-    write_run(folder, spec, columns, metrics)
+    identification = None
+    if setup.identification is not None:
+        found = setup.identification
+        identification = {"samples": found.samples, "epochs": int(found.epoch_loss.shape[0]),
+                          "epoch_loss": [float(v) for v in found.epoch_loss],
+                          "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True))}
+    write_run(folder, spec, columns, metrics, identification)
     click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
                f"{sim.duration:g} s -> {folder}")
     if result.status_name != "ok":
@@ -104,6 +111,36 @@ def list_(what: str | None) -> int:
         click.echo(f"{name}:")
         for kind, model in registries[name].items():
             click.echo(f"  {kind:<16} {summary(model)}")
+    return 0
+
+
+@cli.command()
+@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/reproduce"), show_default=True,
+              help="Folder for table1.{md,csv,json} and figures/.")
+@click.option("--seeds", type=click.IntRange(min=1, max=1000), default=5, show_default=True,
+              help="Seeds per case (common random numbers across controllers).")
+@click.option("--ablations", is_flag=True, help="Add the NN variants: Jacobian source, error Jacobian, "
+              "no identification, no online learning.")
+def reproduce(out: Path, seeds: int, ablations: bool) -> int:
+    """The paper's Table 1 and Figs. 10-17: backstepping vs NN-adaptive backstepping, both cases.
+
+    Exit code 1 if NN-adaptive backstepping does not beat backstepping in a case.
+    """
+    from .rundir import check_writable
+
+    check_writable(out)
+    _enable_compilation_cache()
+    from .reproduce import nn_beats_backstepping
+    from .reproduce import reproduce as run_reproduce
+    from .reproduce import table_markdown
+
+    table = run_reproduce(out, seeds=seeds, ablations=ablations)
+    click.echo(table_markdown(table))
+    click.echo(f"wrote {out}/table1.md, table1.csv, table1.json and figures/ in {table['elapsed_s']:.0f} s")
+    losing = [name for name, wins in nn_beats_backstepping(table).items() if not wins]
+    if losing:
+        click.echo(f"NN-adaptive backstepping does not beat backstepping on: {', '.join(losing)}", err=True)
+        return 1
     return 0
 
 

@@ -61,6 +61,19 @@ def improvement(baseline: float, candidate: float) -> float:
     return 100.0 * (baseline - candidate) / baseline
 
 
+def mean_ci(values: np.ndarray, confidence: float = 0.95) -> dict[str, float | None]:
+    """Mean and the two-sided Student-t confidence interval of the mean over independent values
+    (seeds); the interval is None with fewer than two values."""
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    mean = float(np.mean(values))
+    if values.size < 2:
+        return {"mean": mean, "ci_low": None, "ci_high": None, "n": int(values.size)}
+    half = float(stats.t.ppf(0.5 + confidence / 2, values.size - 1) * np.std(values, ddof=1) / np.sqrt(values.size))
+    return {"mean": mean, "ci_low": mean - half, "ci_high": mean + half, "n": int(values.size)}
+
+
 def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
               settling_threshold: float, failure_time: float | None = None) -> dict:
     """The ``metrics.json`` dictionary of a run (DESIGN 4).

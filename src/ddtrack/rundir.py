@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 import tomli_w
 
 from .errors import RunError
-from .plotting import plot_errors, plot_path, plot_states, plot_torques
+from .plotting import plot_errors, plot_gains, plot_path, plot_states, plot_torques
 from .scenario import Scenario, to_toml_dict
 
 
@@ -56,8 +56,10 @@ def check_writable(folder: Path) -> None:
                        "choose another with --out") from None
 
 
-def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray], metrics: dict) -> list[Path]:
-    """Write a run folder; return the paths written."""
+def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray], metrics: dict,
+              identification: dict | None = None) -> list[Path]:
+    """Write a run folder; return the paths written. ``identification`` (the NN emulator's pre-training:
+    loss per epoch, prediction NMSE) goes to ``identification.json``."""
     folder = Path(folder)
     written = []
 
@@ -69,6 +71,9 @@ def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray
     table = pa.table({name: pa.array(np.asarray(values, dtype=np.float64)) for name, values in columns.items()})
     put("timeseries.parquet", lambda f: pq.write_table(table, f))
     put("metrics.json", lambda f: f.write((json.dumps(metrics, indent=2, allow_nan=False) + "\n").encode()))
+    if identification is not None:
+        put("identification.json",
+            lambda f: f.write((json.dumps(identification, indent=2, allow_nan=False) + "\n").encode()))
     window = tuple(metrics["window"])
     figures = {
         "path.png": plot_path(columns, title=scenario.name),
@@ -76,6 +81,8 @@ def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray
         "errors.png": plot_errors(columns, window=window),
         "torques.png": plot_torques(columns, max_torque=scenario.plant_params().max_torque),
     }
+    if "emulator_loss" in columns:  # an adaptive controller: its gains (the paper's Figs. 13 and 17)
+        figures["gains.png"] = plot_gains(columns)
     for name, fig in figures.items():
         put(f"figures/{name}", lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
         plt.close(fig)

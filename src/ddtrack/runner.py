@@ -11,7 +11,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from .identification import identify
+from .identification import Identification, identify
 from .model import DynamicPlant, RobotParams
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import Draws, SimResult, simulate
@@ -45,14 +45,19 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
     return float(value + draw.absolute * r)
 
 
-def prepare(scenario: Scenario, *, seed: int | None = None) -> tuple[Setup, Draws]:
-    """Build the run's objects and draw all of its randomness from ``seed`` (default the scenario's)."""
+def prepare(scenario: Scenario, *, seed: int | None = None,
+            identification: Identification | None = None) -> tuple[Setup, Draws]:
+    """Build the run's objects and draw all of its randomness from ``seed`` (default the scenario's).
+
+    ``identification`` reuses an emulator identified for the same plant and seed (ablations that only
+    change the gain law), instead of identifying again.
+    """
     keys = streams(scenario.simulation.seed if seed is None else seed)
     k_build, k_identify, k_run = jax.random.split(keys["controller"], 3)
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
     config = scenario.controller
     if isinstance(config, NNAdaptiveConfig) and config.identification:
-        setup = with_identification(scenario, setup, k_identify)
+        setup = with_identification(scenario, setup, k_identify, identification)
     n = scenario.simulation.n_steps
     draws = Draws(
         disturbance=jax.random.normal(keys["disturbance"], (n, 2)),
@@ -62,12 +67,13 @@ def prepare(scenario: Scenario, *, seed: int | None = None) -> tuple[Setup, Draw
     return setup, draws
 
 
-def with_identification(scenario: Scenario, setup: Setup, key: jax.Array) -> Setup:
+def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
+                        result: Identification | None = None) -> Setup:
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
     (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
     config, sim = scenario.controller, scenario.simulation
     outer = setup.controller.outer
-    result = identify(
+    result = result if result is not None else identify(
         setup.plant_params, setup.controller.inner, outer.emulator, key, duration=config.identification_duration,
         epochs=config.epochs, control_period=sim.control_period, substeps=sim.substeps, dither=config.dither,
         gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate), learning_rate=config.learning_rate,
@@ -79,7 +85,11 @@ def with_identification(scenario: Scenario, setup: Setup, key: jax.Array) -> Set
 
 def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
     """Simulate a scenario once. Deterministic: the same scenario and seed give the same bits."""
-    setup, draws = prepare(scenario, seed=seed)
+    return run_setup(scenario, *prepare(scenario, seed=seed))
+
+
+def run_setup(scenario: Scenario, setup: Setup, draws: Draws) -> SimResult:
+    """Simulate a prepared run (:func:`prepare`)."""
     sim = scenario.simulation
     return simulate(
         DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws,

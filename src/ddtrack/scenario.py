@@ -457,6 +457,8 @@ class NNAdaptiveConfig(BacksteppingConfig):
     momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.3, description="Emulator momentum beta.")
     gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
     online_learning: bool = Field(True, description="Train the emulator on every new sample.")
+    learn_saturated: bool = Field(False, description=(
+        "Also train the emulator online on transitions during which a clamp or the torque limit acted."))
     structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
     identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
     identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
@@ -487,7 +489,7 @@ class NNAdaptiveConfig(BacksteppingConfig):
             gate_error=self.gate_error, leakage=self.leakage, gamma=self.gamma, learning_rate=self.learning_rate,
             momentum=self.momentum, clip_norm=self.gradient_clip, freeze_time=freeze, max_velocity=self.max_velocity,
             max_yaw_rate=self.max_yaw_rate, jacobian=self.jacobian, error_jacobian=self.error_jacobian,
-            online_learning=self.online_learning, structured_jacobian=self.structured_jacobian, strict=self.strict,
+            online_learning=self.online_learning, learn_saturated=self.learn_saturated, structured_jacobian=self.structured_jacobian, strict=self.strict,
         )
         return Cascade(outer, self.build_inner(nominal, control_period))
 

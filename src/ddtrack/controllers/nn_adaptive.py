@@ -121,6 +121,7 @@ class NNAdaptiveBackstepping:
     jacobian: str = static_field(default="network")
     error_jacobian: str = static_field(default="exact")
     online_learning: bool = static_field(default=True)
+    learn_saturated: bool = static_field(default=False)
     structured_jacobian: bool = static_field(default=False)
     strict: bool = static_field(default=False)
 
@@ -149,6 +150,8 @@ class NNAdaptiveBackstepping:
         error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
         nu = y[3:5]
         scales, started = self.emulator.scales, memory.started > 0.5
+        # a saturated transition says nothing about the command's effect (the actuators ignored it)
+        learn = started if self.learn_saturated else started & (memory.previous_saturated < 0.5)
 
         # learn the last transition
         z_prev = memory.previous_input / scales.inputs
@@ -159,7 +162,7 @@ class NNAdaptiveBackstepping:
             trained, velocity = momentum_step(mlp, mlp_velocity, backprop(mlp, z_prev, target),
                                               learning_rate=self.learning_rate, momentum=self.momentum,
                                               clip_norm=self.clip_norm)
-            keep = lambda new, old: jnp.where(started, new, old)  # noqa: E731
+            keep = lambda new, old: jnp.where(learn, new, old)  # noqa: E731
             mlp, mlp_velocity = jax.tree_util.tree_map(keep, trained, mlp), jax.tree_util.tree_map(
                 keep, velocity, mlp_velocity)
 

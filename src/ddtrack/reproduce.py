@@ -1,0 +1,209 @@
+"""``ddtrack reproduce``: the paper's Table 1 and Figures 10 to 17 (SPEC 4), over seeds.
+
+Both cases (the shipped ``paper_line`` and ``paper_square`` scenarios, unchanged) are run with
+backstepping and with NN-adaptive backstepping on common random numbers: the same seed gives both
+controllers the same plant, disturbance and noise; only the NN controller's own draws (emulator
+initialisation, identification dither) differ between seeds. The statistic is SPEC 4.4's mean of
+e_tr over the case's metric window; the improvement is paired per seed.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .metrics import improvement, mean_ci, summarize
+from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
+from .rundir import atomic_write
+from .runner import prepare, run_setup
+from .scenario import Scenario, load_scenario
+from .sim import timeseries
+
+#: The paper's Table 1: mean tracking error [m] and improvement [%] (its 52.04 % rounds to 52.05).
+PAPER_TABLE = {
+    "paper_line": {"backstepping": 0.0547, "nn_adaptive": 0.0216, "improvement": 60.51},
+    "paper_square": {"backstepping": 0.0976, "nn_adaptive": 0.0468, "improvement": 52.04},
+}
+CASES = {"paper_line": "Case 1: line y = x", "paper_square": "Case 2: square"}
+STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "settling_time")
+NN = ["controller.kind=nn_adaptive_backstepping"]
+#: controller variants: name -> scenario overrides; the ablations only change the NN controller
+VARIANTS = {"backstepping": ["controller.kind=backstepping"], "nn_adaptive": NN}
+ABLATIONS = {
+    "nn_jacobian_analytic": [*NN, 'controller.jacobian="analytic"'],
+    "nn_jacobian_quasi_static": [*NN, 'controller.jacobian="quasi_static"'],
+    "nn_paper_error_jacobian": [*NN, 'controller.error_jacobian="paper"'],
+    "nn_no_identification": [*NN, "controller.identification=false"],
+    "nn_no_online_learning": [*NN, "controller.online_learning=false"],
+    "nn_learn_saturated": [*NN, "controller.learn_saturated=true"],
+}
+
+
+def scenario_path(name: str) -> Path:
+    """A shipped scenario: inside the installed package, or in the source checkout's ``scenarios/``."""
+    here = Path(__file__).resolve().parent
+    for folder in (here / "_scenarios", here.parents[1] / "scenarios"):
+        if (folder / f"{name}.toml").is_file():
+            return folder / f"{name}.toml"
+    raise FileNotFoundError(f"shipped scenario {name}.toml not found beside the package")
+
+
+@dataclass
+class CaseResult:
+    """Per-seed metrics of every variant on one case, and the seed-0 series for the figures."""
+
+    scenario: Scenario
+    metrics: dict[str, list[dict]] = field(default_factory=dict)
+    series: dict[str, dict] = field(default_factory=dict)
+
+
+def run_case(name: str, seeds: int, variants: dict[str, list[str]],
+             progress: Callable[[str], None] = lambda _: None) -> CaseResult:
+    """Run every variant of one case for seeds 0..seeds-1."""
+    path = scenario_path(name)
+    scenarios = {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
+    result = CaseResult(scenario=scenarios["backstepping"])
+    for seed in range(seeds):
+        identification = None  # shared by the variants that identify (same plant, seed and emulator init)
+        for variant, scenario in scenarios.items():
+            setup, draws = prepare(scenario, seed=seed, identification=identification)
+            identification = setup.identification if setup.identification is not None else identification
+            sim = scenario.simulation
+            run = run_setup(scenario, setup, draws)
+            columns = timeseries(run)
+            metrics = summarize(columns, status=run.status_name, window=sim.window, control_period=sim.control_period,
+                                settling_threshold=sim.settling_threshold, failure_time=run.failure_time)
+            result.metrics.setdefault(variant, []).append(metrics)
+            if seed == 0:
+                result.series[variant] = columns
+            progress(f"{name} seed {seed} {variant}: {metrics['status']}, e_tr_mean {metrics['e_tr_mean']}")
+    return result
+
+
+def _stat(runs: list[dict], key: str) -> dict:
+    values = [r[key] for r in runs]
+    if any(v is None for v in values):
+        return {"mean": None, "ci_low": None, "ci_high": None, "n": len(values), "values": values}
+    return mean_ci(np.asarray(values)) | {"values": values}
+
+
+def summarise_case(name: str, case: CaseResult) -> dict:
+    """The Table 1 entry of one case: statistics per variant, paired improvements over backstepping."""
+    baseline = case.metrics["backstepping"]
+    entry: dict = {"title": CASES[name], "window": list(case.scenario.simulation.window),
+                   "paper": PAPER_TABLE[name], "controllers": {}, "improvement": {}}
+    for variant, runs in case.metrics.items():
+        entry["controllers"][variant] = {key: _stat(runs, key) for key in STATISTICS}
+        entry["controllers"][variant]["status"] = [r["status"] for r in runs]
+        if runs[0].get("final_gains") is not None and variant != "backstepping":
+            entry["controllers"][variant]["final_gains"] = [r["final_gains"] for r in runs]
+        if variant != "backstepping":
+            paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) if r["e_tr_mean"] is not None else None
+                      for b, r in zip(baseline, runs, strict=True)]
+            entry["improvement"][variant] = (mean_ci(np.asarray(paired)) | {"values": paired}
+                                             if None not in paired else {"mean": None, "values": paired})
+    return entry
+
+
+def _fmt(stat: dict, scale: float = 1.0, digits: int = 4) -> str:
+    if stat["mean"] is None:  # a failed run, or a settling time never reached, in some seeds
+        missing = sum(v is None for v in stat.get("values", []))
+        return f"n/a in {missing} of {len(stat.get('values', []))} seeds"
+    text = f"{stat['mean'] * scale:.{digits}f}"
+    if stat.get("ci_low") is not None:
+        text += f" [{stat['ci_low'] * scale:.{digits}f}, {stat['ci_high'] * scale:.{digits}f}]"
+    return text
+
+
+def table_markdown(table: dict) -> str:
+    """Table 1 as Markdown: ours (mean [95 % CI] over seeds) beside the paper's."""
+    lines = [f"# Table 1, reproduced ({table['seeds']} seeds; mean [95 % CI])", ""]
+    lines += ["| case | controller | mean e_tr [m] | paper [m] | RMS e_tr [m] | max e_tr [m] | settling [s] "
+              "| improvement [%] | paper [%] |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, entry in table["cases"].items():
+        for variant, stats in entry["controllers"].items():
+            paper = entry["paper"].get(variant)
+            gain = entry["improvement"].get(variant)
+            lines.append(
+                f"| {entry['title']} | {variant} | {_fmt(stats['e_tr_mean'])} | {paper if paper else ''} | "
+                f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'], digits=2)} | "
+                f"{_fmt(gain, digits=1) if gain else ''} | "
+                f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |")
+    lines += ["", f"Statistic: mean of e_tr over each case's metric window (SPEC 4.4): "
+              + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())
+              + ". Improvement: 100 (E_BS - E_NN) / E_BS, paired by seed.", ""]
+    return "\n".join(lines)
+
+
+def table_csv(table: dict) -> str:
+    """One row per case, controller and statistic."""
+    out = io.StringIO()
+    writer = csv.writer(out)
+    writer.writerow(["case", "controller", "statistic", "mean", "ci_low", "ci_high", "n", "paper"])
+    for name, entry in table["cases"].items():
+        for variant, stats in entry["controllers"].items():
+            for key in STATISTICS:
+                s = stats[key]
+                paper = entry["paper"].get(variant) if key == "e_tr_mean" else None
+                writer.writerow([name, variant, key, s["mean"], s["ci_low"], s["ci_high"], s["n"],
+                                 "" if paper is None else paper])
+            if variant in entry["improvement"]:
+                s = entry["improvement"][variant]
+                writer.writerow([name, variant, "improvement_percent", s["mean"], s.get("ci_low"), s.get("ci_high"),
+                                 table["seeds"], entry["paper"]["improvement"] if variant == "nn_adaptive" else ""])
+    return out.getvalue()
+
+
+def case_figures(name: str, case: CaseResult) -> dict[str, plt.Figure]:
+    """The paper's Figs. 10-13 (line) or 14-17 (square): path, states, deviations, gains (seed 0)."""
+    bs, nn = case.series["backstepping"], case.series["nn_adaptive"]
+    window = tuple(case.scenario.simulation.window)
+    path = plot_path(bs, label="backstepping", title=CASES[name])
+    plot_path(nn, ax=path.axes[0], label="NN-adaptive", color=ADAPTIVE, reference=False)
+    path.axes[0].legend(loc="best", fontsize=8)
+    states = plot_states(bs, label="backstepping")
+    plot_states(nn, axes=states.axes, label="NN-adaptive", color=ADAPTIVE, reference=False)
+    states.axes[0].legend(loc="best", fontsize=8)
+    errors = plot_errors(bs, window=window, label="backstepping")
+    plot_errors(nn, axes=errors.axes, label="NN-adaptive", color=ADAPTIVE)
+    errors.axes[0].legend(loc="best", fontsize=8)
+    gains = plot_gains(nn, label="NN-adaptive")
+    plot_gains(bs, axes=gains.axes, label="backstepping", color="#1f77b4")
+    gains.axes[0].legend(loc="best", fontsize=8)
+    return {f"{name}_path.png": path, f"{name}_states.png": states, f"{name}_errors.png": errors,
+            f"{name}_gains.png": gains}
+
+
+def reproduce(out: Path, *, seeds: int = 5, ablations: bool = False,
+              progress: Callable[[str], None] = lambda _: None) -> dict:
+    """Run both cases, write ``table1.{md,csv,json}`` and ``figures/`` into ``out``; return the table."""
+    start = time.perf_counter()
+    variants = VARIANTS | (ABLATIONS if ablations else {})
+    cases = {name: run_case(name, seeds, variants, progress) for name in CASES}
+    table = {"seeds": seeds, "ablations": ablations,
+             "cases": {name: summarise_case(name, case) for name, case in cases.items()}}
+    for name, case in cases.items():
+        for file, fig in case_figures(name, case).items():
+            atomic_write(out / "figures" / file, lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
+            plt.close(fig)
+    table["elapsed_s"] = time.perf_counter() - start
+    atomic_write(out / "table1.json", lambda f: f.write((json.dumps(table, indent=2, allow_nan=False) + "\n").encode()))
+    atomic_write(out / "table1.csv", lambda f: f.write(table_csv(table).encode()))
+    atomic_write(out / "table1.md", lambda f: f.write(table_markdown(table).encode()))
+    return table
+
+
+def nn_beats_backstepping(table: dict) -> dict[str, bool]:
+    """Per case: does NN-adaptive backstepping have a lower mean error than backstepping (mean over seeds)?"""
+    verdict = {}
+    for name, entry in table["cases"].items():
+        gain = entry["improvement"]["nn_adaptive"]["mean"]
+        verdict[name] = gain is not None and gain > 0.0
+    return verdict
