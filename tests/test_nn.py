@@ -14,8 +14,17 @@ import pytest
 
 import ddtrack  # noqa: F401  (float64)
 from ddtrack.controllers import MLP, Emulator, Scales, emulator_scales, init_mlp
-from ddtrack.controllers.nn import backprop, forward, input_jacobian, momentum_step, predict, sample_loss, zeros_like
+from ddtrack.controllers import nn
+from ddtrack.controllers.nn import forward, zeros_like
 from ddtrack.geometry import body_increment, rotation
+
+
+# jitted once per shape: eager op-by-op dispatch would dominate the run time of the loops below
+predict = jax.jit(nn.predict)
+input_jacobian = jax.jit(nn.input_jacobian)
+sample_loss = jax.jit(nn.sample_loss)
+backprop = jax.jit(nn.backprop)
+momentum_step = jax.jit(nn.momentum_step)
 
 
 def random_mlp(seed: int, n_in: int = 4, n_hidden: int = 20, n_out: int = 3, scale: float = 1.0) -> MLP:
