@@ -9,14 +9,14 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 import pytest
+from jax.flatten_util import ravel_pytree
 
 import ddtrack  # noqa: F401  (float64)
-from ddtrack.controllers import MLP, Emulator, Scales, emulator_scales, init_mlp
-from ddtrack.controllers import nn
+from ddtrack import geometry
+from ddtrack.controllers import MLP, Emulator, Scales, emulator_scales, init_mlp, nn
 from ddtrack.controllers.nn import forward, zeros_like
-from ddtrack.geometry import body_increment, rotation
+from ddtrack.geometry import rotation, wrap_angle
 
 
 # jitted once per shape: eager op-by-op dispatch would dominate the run time of the loops below
@@ -25,6 +25,9 @@ input_jacobian = jax.jit(nn.input_jacobian)
 sample_loss = jax.jit(nn.sample_loss)
 backprop = jax.jit(nn.backprop)
 momentum_step = jax.jit(nn.momentum_step)
+predict_jacfwd = jax.jit(jax.jacfwd(nn.predict, argnums=2))
+loss_grad = jax.jit(jax.grad(nn.sample_loss))
+body_increment = jax.jit(geometry.body_increment)
 
 
 def random_mlp(seed: int, n_in: int = 4, n_hidden: int = 20, n_out: int = 3, scale: float = 1.0) -> MLP:
@@ -67,7 +70,7 @@ def test_input_jacobian_matches_finite_differences_and_jacfwd(n_in):
         fd = central_difference(lambda x: predict(mlp, scales, jnp.asarray(x)), z, 1e-5)
         # central differences at h = 1e-5: O(h^2) truncation ~1e-10 and rounding ~eps/h ~1e-11, relative
         np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-6 * np.max(np.abs(jac)))
-        ad = np.asarray(jax.jacfwd(lambda x: predict(mlp, scales, x))(jnp.asarray(z)))
+        ad = np.asarray(predict_jacfwd(mlp, scales, jnp.asarray(z)))
         # the same derivative by forward-mode AD: only float64 rounding (a few ulps of the largest entry) differs
         np.testing.assert_allclose(jac, ad, rtol=1e-12, atol=1e-13 * np.max(np.abs(jac)))
 
@@ -95,7 +98,7 @@ def test_backprop_matches_autodiff_and_finite_differences():
         mlp = random_mlp(200 + trial, scale=0.5)
         z, target = jnp.asarray(rng.uniform(-1.5, 1.5, 4)), jnp.asarray(rng.uniform(-1.0, 1.0, 3))
         grad = backprop(mlp, z, target)
-        auto = jax.grad(sample_loss)(mlp, z, target)
+        auto = loss_grad(mlp, z, target)
         for name in ("w1", "b1", "w2", "b2"):
             ours, theirs = np.asarray(getattr(grad, name)), np.asarray(getattr(auto, name))
             assert ours.shape == np.asarray(getattr(mlp, name)).shape
@@ -204,8 +207,6 @@ def test_translation_along_the_heading_is_forward_only():
     (np.pi, 0.01), (np.pi, -0.01),
 ])
 def test_pure_rotation_gives_the_wrapped_heading_change(theta, d_theta):
-    from ddtrack.geometry import wrap_angle
-
     pose = np.array([1.5, -2.0, theta])
     for stored in (theta + d_theta, float(wrap_angle(theta + d_theta))):  # unwrapped and wrapped storage
         inc = np.asarray(body_increment(jnp.asarray(pose), jnp.asarray([1.5, -2.0, stored])))
@@ -278,7 +279,9 @@ def test_init_mlp_bounds_shapes_and_determinism(n_in, n_hidden):
     other = init_mlp(jax.random.PRNGKey(4), n_in, n_hidden, 3)
     assert not np.array_equal(np.asarray(other.w1), np.asarray(mlp.w1))
     # W1 and W2 come from different sub-keys (not the same stream rescaled)
-    assert not np.allclose(np.asarray(mlp.w1).ravel()[:3] * np.sqrt(n_in), np.asarray(mlp.w2).ravel()[:3] * np.sqrt(n_hidden))
+    unit_w1 = np.asarray(mlp.w1).ravel()[:3] * np.sqrt(n_in)
+    unit_w2 = np.asarray(mlp.w2).ravel()[:3] * np.sqrt(n_hidden)
+    assert not np.allclose(unit_w1, unit_w2)
 
 
 def test_forward_is_tanh_hidden_linear_output():

@@ -107,10 +107,11 @@ def list_(what: str | None) -> int:
     from .scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, summary
 
     registries = {"controllers": CONTROLLERS, "trajectories": TRAJECTORIES, "disturbances": DISTURBANCES}
+    width = max(len(kind) for registry in registries.values() for kind in registry)
     for name in [what] if what else LISTS:
         click.echo(f"{name}:")
         for kind, model in registries[name].items():
-            click.echo(f"  {kind:<16} {summary(model)}")
+            click.echo(f"  {kind:<{width}}  {summary(model)}")
     return 0
 
 
