@@ -25,6 +25,7 @@ LAYERS = [
     {"scenario", "metrics", "identification"},
     {"runner", "plotting"},
     {"rundir"},
+    {"mc"},
     {"reproduce", "report", "envs", "sweep"},
     {"cli"},
 ]

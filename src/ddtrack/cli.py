@@ -145,6 +145,48 @@ def reproduce(out: Path, seeds: int, ablations: bool) -> int:
     return 0
 
 
+@cli.command()
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option("-n", "n", type=click.IntRange(min=1, max=1_000_000), required=True, help="Runs per controller.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="First seed.")
+@click.option("--controllers", default="backstepping", show_default=True, metavar="A,B,...",
+              help="Controllers to compare on common random numbers; the first is the baseline.")
+@click.option("--vary", multiple=True, metavar="FIELD=DIST:SPREAD", help="Draw a plant parameter per run, "
+              "e.g. --vary mass=uniform:0.2 (repeatable).")
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a scenario value.")
+@click.option("--chunk", type=click.IntRange(min=1, max=100_000), default=64, show_default=True,
+              help="Runs per vmapped batch (bounds memory).")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/mc"), show_default=True)
+def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...], overrides: tuple[str, ...],
+       chunk: int, out: Path) -> int:
+    """Monte Carlo: N seeds of SCENARIO for each controller, on common random numbers."""
+    from .rundir import check_writable
+
+    names = [c.strip() for c in controllers.split(",") if c.strip()]
+    if not names or len(set(names)) != len(names):
+        raise ConfigError("--controllers", f"'{controllers}' must name distinct controllers, comma-separated",
+                          "e.g. --controllers backstepping,nn_adaptive_backstepping")
+    from .mc import format_summary, load_specs, run_specs, summarise, write
+
+    specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
+    check_writable(out)
+    _enable_compilation_cache()
+    progress = sys.stderr.isatty()
+
+    def report(name: str, done: int) -> None:
+        if progress:
+            click.echo(f"\r{name}: {done}/{n} runs", nl=False, err=True)
+
+    rows = run_specs(specs, n=n, seed=seed, chunk_size=chunk, on_chunk=report)
+    if progress:
+        click.echo("", err=True)
+    summary = summarise(rows)
+    write(out, rows, summary)
+    click.echo(format_summary(summary, n))
+    click.echo(f"wrote {out}/runs.parquet, runs.csv, summary.json")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
     try:

@@ -7,14 +7,17 @@ disturbances unchanged (common random numbers).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .identification import Identification, identify
+from .metrics import summarize
 from .model import DynamicPlant, RobotParams
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
-from .sim import Draws, SimResult, simulate
+from .sim import Draws, SimResult, simulate, simulate_batch, stack, timeseries
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
 
@@ -45,18 +48,29 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
     return float(value + draw.absolute * r)
 
 
-def prepare(scenario: Scenario, *, seed: int | None = None,
-            identification: Identification | None = None) -> tuple[Setup, Draws]:
+def controller_keys(seed: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The controller stream split into (construction, identification, run) keys."""
+    k_build, k_identify, k_run = jax.random.split(streams(seed)["controller"], 3)
+    return k_build, k_identify, k_run
+
+
+def needs_identification(scenario: Scenario) -> bool:
+    return isinstance(scenario.controller, NNAdaptiveConfig) and scenario.controller.identification
+
+
+def prepare(scenario: Scenario, *, seed: int | None = None, identification: Identification | None = None,
+            identify: bool = True) -> tuple[Setup, Draws]:
     """Build the run's objects and draw all of its randomness from ``seed`` (default the scenario's).
 
     ``identification`` reuses an emulator identified for the same plant and seed (ablations that only
-    change the gain law), instead of identifying again.
+    change the gain law), instead of identifying again; ``identify=False`` skips it (a batch identifies
+    all its runs at once).
     """
-    keys = streams(scenario.simulation.seed if seed is None else seed)
-    k_build, k_identify, k_run = jax.random.split(keys["controller"], 3)
+    seed = scenario.simulation.seed if seed is None else seed
+    keys = streams(seed)
+    k_build, k_identify, k_run = controller_keys(seed)
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
-    config = scenario.controller
-    if isinstance(config, NNAdaptiveConfig) and config.identification:
+    if identify and needs_identification(scenario):
         setup = with_identification(scenario, setup, k_identify, identification)
     n = scenario.simulation.n_steps
     draws = Draws(
@@ -71,16 +85,55 @@ def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
                         result: Identification | None = None) -> Setup:
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
     (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
-    config, sim = scenario.controller, scenario.simulation
     outer = setup.controller.outer
-    result = result if result is not None else identify(
-        setup.plant_params, setup.controller.inner, outer.emulator, key, duration=config.identification_duration,
-        epochs=config.epochs, control_period=sim.control_period, substeps=sim.substeps, dither=config.dither,
-        gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate), learning_rate=config.learning_rate,
-        momentum=config.momentum, clip_norm=config.gradient_clip, disturbance=setup.disturbance, noise=setup.noise,
-    )
+    result = result if result is not None else _identifier(scenario)(
+        setup.plant_params, setup.controller.inner, outer.emulator, key, setup.disturbance, setup.noise)
     controller = dataclasses.replace(setup.controller, outer=dataclasses.replace(outer, emulator=result.emulator))
     return dataclasses.replace(setup, controller=controller, identification=result)
+
+
+def _identifier(scenario: Scenario):
+    """identify(plant, inner, emulator, key, disturbance, noise) with the scenario's settings bound."""
+    config, sim = scenario.controller, scenario.simulation
+
+    def run_identification(plant, inner, emulator, key, disturbance, noise):
+        return identify(plant, inner, emulator, key, duration=config.identification_duration, epochs=config.epochs,
+                        control_period=sim.control_period, substeps=sim.substeps, dither=config.dither,
+                        gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate),
+                        learning_rate=config.learning_rate, momentum=config.momentum,
+                        clip_norm=config.gradient_clip, disturbance=disturbance, noise=noise)
+
+    return run_identification
+
+
+def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draws]:
+    """:func:`prepare` for many seeds, stacked along a leading batch axis; NN emulators are identified
+    for all the runs at once (``vmap``)."""
+    pairs = [prepare(scenario, seed=seed, identify=False) for seed in seeds]
+    fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise")
+    setup = dataclasses.replace(pairs[0][0], **{f: stack([getattr(p[0], f) for p in pairs]) for f in fields})
+    draws = stack([p[1] for p in pairs])
+    if needs_identification(scenario):
+        keys = stack([controller_keys(seed)[1] for seed in seeds])
+        identify_all = jax.vmap(_identifier(scenario), in_axes=(0, 0, 0, 0, 0, 0))
+        found = identify_all(setup.plant_params, setup.controller.inner, setup.controller.outer.emulator, keys,
+                             setup.disturbance, setup.noise)
+        setup = with_identification(scenario, setup, keys, found)
+    return setup, draws
+
+
+def run_batch(scenario: Scenario, seeds: Sequence[int]) -> SimResult:
+    """Simulate one run per seed in one vmapped call; row i equals ``run(scenario, seed=seeds[i])``."""
+    setup, draws = prepare_batch(scenario, seeds)
+    sim = scenario.simulation
+    return simulate_batch(DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, setup.x0, draws,
+                          setup.disturbance, setup.noise, n_steps=sim.n_steps, control_period=sim.control_period,
+                          substeps=sim.substeps, divergence_error=sim.divergence_error)
+
+
+def row(result: SimResult, i: int) -> SimResult:
+    """Run i of a batch result, as a single :class:`SimResult`."""
+    return jax.tree_util.tree_map(lambda leaf: leaf[i], result)
 
 
 def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
@@ -96,3 +149,33 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws) -> SimResult:
         n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
         disturbance=setup.disturbance, noise=setup.noise, divergence_error=sim.divergence_error,
     )
+
+
+def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 64,
+                on_chunk: Callable[[int], None] = lambda done: None) -> list[dict]:
+    """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
+    the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
+
+    The last chunk is padded with repeats of its first seed, so every chunk has one shape and compiles once.
+    """
+    sim = scenario.simulation
+    drawn = [field for field, draw in scenario.randomize if draw is not None]
+    rows: list[dict] = []
+    for start in range(0, len(seeds), chunk_size):
+        chunk = list(seeds[start:start + chunk_size])
+        padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
+        setup, draws = prepare_batch(scenario, padded)
+        result = simulate_batch(DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, setup.x0,
+                                draws, setup.disturbance, setup.noise, n_steps=sim.n_steps,
+                                control_period=sim.control_period, substeps=sim.substeps,
+                                divergence_error=sim.divergence_error)
+        result = jax.tree_util.tree_map(np.asarray, result)
+        for i, seed in enumerate(chunk):
+            single = row(result, i)
+            metrics = summarize(timeseries(single), status=single.status_name, window=sim.window,
+                                control_period=sim.control_period, settling_threshold=sim.settling_threshold,
+                                failure_time=single.failure_time)
+            plant = {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
+            rows.append({"seed": seed, **plant, **metrics})
+        on_chunk(len(rows))
+    return rows

@@ -1,6 +1,7 @@
 """The simulator: fixed-step RK4 under a zero-order hold, one ``lax.scan`` per run (DESIGN 3)."""
+from .batch import simulate_batch, stack
 from .integrators import rk4, rk4_step
 from .result import REMEDIES, STATUS_NAMES, SimResult, timeseries
 from .simulate import Draws, simulate
 
-__all__ = ["Draws", "REMEDIES", "STATUS_NAMES", "SimResult", "rk4", "rk4_step", "simulate", "timeseries"]
+__all__ = ["Draws", "REMEDIES", "STATUS_NAMES", "SimResult", "rk4", "rk4_step", "simulate", "simulate_batch", "stack", "timeseries"]

@@ -1,0 +1,110 @@
+"""``ddtrack mc``: Monte Carlo over seeds (and drawn plant parameters) for several controllers, on
+common random numbers: seed s gives every controller the same plant, disturbance and noise."""
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv  # noqa: F401  (pa.csv)
+import pyarrow.parquet as pq
+
+from .errors import ConfigError
+from .metrics import improvement, mean_ci
+from .rundir import atomic_write
+from .runner import monte_carlo
+from .scenario import Scenario, load_scenario
+
+STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
+
+
+def vary_override(spec: str) -> str:
+    """``FIELD=DIST:SPREAD[:absolute]`` (e.g. ``mass=uniform:0.2``) -> a ``randomize.FIELD`` override."""
+    field, sep, rest = spec.partition("=")
+    parts = rest.split(":")
+    if not sep or len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] not in ("relative", "absolute")):
+        raise ConfigError("--vary", f"'{spec}' is not FIELD=DISTRIBUTION:SPREAD[:absolute]",
+                          "e.g. --vary mass=uniform:0.2 (plus or minus 20 %) or --vary com_offset=normal:0.01:absolute")
+    kind = parts[2] if len(parts) == 3 else "relative"
+    return f'randomize.{field.strip()}={{distribution="{parts[0]}", {kind}={parts[1]}}}'
+
+
+def load_specs(scenario: Path, *, controllers: Sequence[str], vary: Sequence[str] = (),
+               overrides: Sequence[str] = ()) -> dict[str, Scenario]:
+    """The scenario once per controller, with the overrides and the ``--vary`` draws applied."""
+    extra = [*overrides, *(vary_override(v) for v in vary)]
+    return {name: load_scenario(scenario, overrides=extra, controller=name) for name in controllers}
+
+
+def run_specs(specs: dict[str, Scenario], *, n: int, seed: int = 0, chunk_size: int = 64,
+              on_chunk: Callable[[str, int], None] = lambda name, done: None) -> dict[str, list[dict]]:
+    """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.runner.monte_carlo`)."""
+    seeds = list(range(seed, seed + n))
+    return {name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=lambda done, name=name: on_chunk(name, done))
+            for name, spec in specs.items()}
+
+
+def _ci(values: list) -> dict:
+    finite = [v for v in values if v is not None]
+    summary = mean_ci(np.asarray(finite)) if finite else {"mean": None, "ci_low": None, "ci_high": None, "n": 0}
+    return summary | {"missing": len(values) - len(finite)}
+
+
+def summarise(rows: dict[str, list[dict]]) -> dict:
+    """Mean and 95 % CI of every statistic per controller, and the paired improvement of each controller's
+    mean tracking error over the first controller's (seeds where both runs succeeded)."""
+    names = list(rows)
+    baseline = rows[names[0]]
+    summary: dict = {"controllers": {}, "improvement_over": names[0], "improvement": {}}
+    for name, runs in rows.items():
+        summary["controllers"][name] = {key: _ci([r[key] for r in runs]) for key in STATISTICS}
+        summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
+        if name != names[0]:
+            paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) for b, r in zip(baseline, runs, strict=True)
+                      if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0]
+            summary["improvement"][name] = _ci(paired) | {"paired_runs": len(paired)}
+    return summary
+
+
+def table(rows: dict[str, list[dict]]) -> pa.Table:
+    """One row per run: controller, seed, drawn plant values, metrics, status."""
+    records = []
+    for name, runs in rows.items():
+        for r in runs:
+            flat = {k: v for k, v in r.items() if k not in ("window", "final_gains", "failure_time")}
+            gains = r.get("final_gains") or [None, None, None]
+            records.append({"controller": name, **flat, "window_start": r["window"][0], "window_end": r["window"][1],
+                            "failure_time": r.get("failure_time"), "final_kx": gains[0], "final_ky": gains[1],
+                            "final_ktheta": gains[2]})
+    return pa.Table.from_pylist(records)
+
+
+def write(out: Path, rows: dict[str, list[dict]], summary: dict) -> None:
+    """``runs.parquet``, ``runs.csv`` and ``summary.json`` into ``out``, each written atomically."""
+    runs = table(rows)
+    atomic_write(out / "runs.parquet", lambda f: pq.write_table(runs, f))
+    csv_buffer = io.BytesIO()
+    pa.csv.write_csv(runs, csv_buffer)
+    atomic_write(out / "runs.csv", lambda f: f.write(csv_buffer.getvalue()))
+    atomic_write(out / "summary.json", lambda f: f.write((json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()))
+
+
+def format_summary(summary: dict, n: int) -> str:
+    """The printed summary: mean [95 % CI] per controller and the paired improvement."""
+    lines = [f"{n} runs per controller; mean [95 % CI]"]
+    for name, stats in summary["controllers"].items():
+        e = stats["e_tr_mean"]
+        text = "all runs failed" if e["mean"] is None else f"{e['mean']:.4f} [{e['ci_low']:.4f}, {e['ci_high']:.4f}] m"
+        lines.append(f"  {name:<26} e_tr_mean {text}; failures {stats['failures']}")
+    for name, gain in summary["improvement"].items():
+        if gain["mean"] is None:
+            lines.append(f"  {name} vs {summary['improvement_over']}: no paired runs")
+        elif gain["ci_low"] is None:
+            lines.append(f"  {name} vs {summary['improvement_over']}: {gain['mean']:.1f} % (one paired run)")
+        else:
+            lines.append(f"  {name} vs {summary['improvement_over']}: improvement {gain['mean']:.1f} % "
+                         f"[{gain['ci_low']:.1f}, {gain['ci_high']:.1f}] (paired, {gain['paired_runs']} seeds)")
+    return "\n".join(lines)

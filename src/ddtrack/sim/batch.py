@@ -1,0 +1,31 @@
+"""A batch of runs: ``jax.vmap`` of :func:`simulate` over a leading axis of every argument."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .result import SimResult
+from .simulate import simulate
+
+
+def stack(trees: Sequence[Any]) -> Any:
+    """Stack pytrees of one structure along a new leading axis (the batch axis)."""
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(leaf) for leaf in leaves]), *trees)
+
+
+@partial(jax.jit, static_argnames=("n_steps", "substeps"))
+def simulate_batch(plant: Any, controller: Any, trajectory: Any, x0: Any, draws: Any, disturbance: Any, noise: Any,
+                   *, n_steps: int, control_period: float, substeps: int, divergence_error: float) -> SimResult:
+    """Run B simulations at once; every argument but the static ones has a leading batch axis B.
+
+    Row i is the run :func:`simulate` would give for the arguments' row i (the same code, vmapped).
+    """
+    def one(plant, controller, trajectory, x0, draws, disturbance, noise):
+        return simulate(plant, controller, trajectory, x0, draws, n_steps=n_steps, control_period=control_period,
+                        substeps=substeps, disturbance=disturbance, noise=noise, divergence_error=divergence_error)
+
+    return jax.vmap(one)(plant, controller, trajectory, x0, draws, disturbance, noise)

@@ -1,0 +1,95 @@
+"""The batch engine and Monte Carlo (`ddtrack mc`): row i of a batch is the single run, on common random numbers."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import ddtrack
+from conftest import SCENARIOS
+from ddtrack.mc import load_specs, run_specs, summarise
+from ddtrack.runner import monte_carlo, prepare, row, run_batch
+
+SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]"]
+# Gaussian wheel disturbance, pose noise and a random plant mass: every random stream is exercised
+RANDOM = [*SHORT, 'randomize.mass={distribution="uniform", relative=0.2}']
+
+
+@pytest.mark.parametrize("kind", ["backstepping", "nn_adaptive_backstepping"])
+def test_batch_row_equals_the_single_run(kind):
+    extra = ["controller.epochs=2", "controller.identification_duration=5"] if kind != "backstepping" else []
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, *extra], controller=kind)
+    seeds = [4, 0, 11]
+    batch = run_batch(scenario, seeds)
+    for i, seed in enumerate(seeds):
+        single = ddtrack.run(scenario, seed=seed)
+        for name in ("state", "control", "error"):
+            # the same float64 code, vmapped: XLA may reassociate a sum, nothing more (measured ~5e-15)
+            np.testing.assert_allclose(np.asarray(getattr(row(batch, i), name)), np.asarray(getattr(single, name)),
+                                       rtol=0, atol=1e-12)
+        assert int(row(batch, i).status) == int(single.status)
+    assert not np.allclose(np.asarray(row(batch, 0).state), np.asarray(row(batch, 1).state))  # seeds differ
+
+
+def test_common_random_numbers_across_controllers():
+    bs, nn = (ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM, controller=kind)
+              for kind in ("backstepping", "nn_adaptive_backstepping"))
+    (setup_bs, draws_bs) = prepare(bs, seed=9)
+    (setup_nn, draws_nn) = prepare(nn, seed=9, identify=False)
+    assert setup_bs.plant_params == setup_nn.plant_params  # the same drawn plant
+    assert np.array_equal(draws_bs.disturbance, draws_nn.disturbance)
+    assert np.array_equal(draws_bs.noise, draws_nn.noise)
+
+
+def test_chunking_does_not_change_the_runs():
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM)
+    whole = monte_carlo(scenario, list(range(5)), chunk_size=5)
+    chunked = monte_carlo(scenario, list(range(5)), chunk_size=2)  # 2 + 2 + 1 padded to 2
+    assert [r["seed"] for r in chunked] == list(range(5))
+    for a, b in zip(whole, chunked, strict=True):
+        assert a["plant_mass"] == b["plant_mass"] and 9.6 <= a["plant_mass"] <= 14.4  # 12 kg +-20 %
+        assert a["e_tr_mean"] == pytest.approx(b["e_tr_mean"], abs=1e-12)
+    assert len({r["plant_mass"] for r in whole}) == 5
+
+
+def test_summary_pairs_runs_by_seed():
+    nn_only = ["controller.epochs=2", "controller.identification_duration=5"]  # keys backstepping does not have
+    specs = load_specs(SCENARIOS / "figure_eight.toml", controllers=["backstepping"], overrides=RANDOM)
+    specs |= load_specs(SCENARIOS / "figure_eight.toml", controllers=["nn_adaptive_backstepping"],
+                        overrides=[*RANDOM, *nn_only])
+    rows = run_specs(specs, n=3, seed=2, chunk_size=3)
+    summary = summarise(rows)
+    paired = [100 * (b["e_tr_mean"] - n["e_tr_mean"]) / b["e_tr_mean"]
+              for b, n in zip(rows["backstepping"], rows["nn_adaptive_backstepping"], strict=True)]
+    gain = summary["improvement"]["nn_adaptive_backstepping"]
+    assert gain["mean"] == pytest.approx(np.mean(paired)) and gain["paired_runs"] == 3
+    assert gain["ci_low"] < gain["mean"] < gain["ci_high"]
+    assert [r["seed"] for r in rows["backstepping"]] == [2, 3, 4]
+
+
+def test_mc_command_writes_its_tables(tmp_path, cli):
+    out = tmp_path / "mc"
+    code, stdout, _ = cli("mc", SCENARIOS / "figure_eight.toml", "-n", "4", "--controllers", "backstepping",
+                          "--vary", "mass=uniform:0.2", *[a for s in SHORT for a in ("--set", s)], "--chunk", "3",
+                          "--out", out)
+    assert code == 0 and "4 runs per controller" in stdout and "e_tr_mean" in stdout
+    table = pq.read_table(out / "runs.parquet")
+    assert table.num_rows == 4 and table.column("seed").to_pylist() == [0, 1, 2, 3]
+    assert {"controller", "plant_mass", "e_tr_mean", "status", "effort"} <= set(table.column_names)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["controllers"]["backstepping"]["failures"] == 0
+    assert (out / "runs.csv").read_text().startswith('"controller","seed"')
+
+
+@pytest.mark.parametrize(("args", "field"), [
+    (["--vary", "mass=uniform"], "--vary"),
+    (["--vary", "mas=uniform:0.2"], "randomize.mas"),
+    (["--controllers", "backstepping,backstepping"], "--controllers"),
+    (["--controllers", "nn"], "controller.kind"),
+])
+def test_mc_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
+    code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", *args, "--out", tmp_path / "mc")
+    assert code == 2 and stderr.startswith(f"error: {field}")
+    assert not (tmp_path / "mc").exists()
