@@ -13,7 +13,7 @@ _jax.config.update("jax_enable_x64", True)  # float64 everywhere (DESIGN 1); set
 
 from .errors import ConfigError, DdtrackError, RunError  # noqa: E402
 from .metrics import improvement, summarize, tracking_error  # noqa: E402
-from .runner import prepare, run  # noqa: E402
+from .runner import monte_carlo, prepare, run, run_batch  # noqa: E402
 from .scenario import Scenario, load_scenario, validate_scenario  # noqa: E402
 from .sim import Draws, SimResult, simulate, timeseries  # noqa: E402
 
@@ -21,5 +21,6 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ConfigError", "DdtrackError", "Draws", "RunError", "Scenario", "SimResult", "improvement", "load_scenario",
-    "prepare", "run", "simulate", "summarize", "timeseries", "tracking_error", "validate_scenario",
+    "monte_carlo", "prepare", "run", "run_batch", "simulate", "summarize", "timeseries", "tracking_error",
+    "validate_scenario",
 ]
