@@ -1,4 +1,4 @@
-"""Seeds and randomness, and a single run (DESIGN 3).
+"""Seeds and randomness, single runs, batches and Monte Carlo (DESIGN 3).
 
 One seed is split, in a fixed order, into streams for the plant-parameter draw, the disturbance,
 the measurement noise and the controller. So swapping the controller leaves the plant and its
@@ -124,11 +124,7 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
 
 def run_batch(scenario: Scenario, seeds: Sequence[int]) -> SimResult:
     """Simulate one run per seed in one vmapped call; row i equals ``run(scenario, seed=seeds[i])``."""
-    setup, draws = prepare_batch(scenario, seeds)
-    sim = scenario.simulation
-    return simulate_batch(DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, setup.x0, draws,
-                          setup.disturbance, setup.noise, n_steps=sim.n_steps, control_period=sim.control_period,
-                          substeps=sim.substeps, divergence_error=sim.divergence_error)
+    return run_setup(scenario, *prepare_batch(scenario, seeds), batched=True)
 
 
 def row(result: SimResult, i: int) -> SimResult:
@@ -141,14 +137,17 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
     return run_setup(scenario, *prepare(scenario, seed=seed))
 
 
-def run_setup(scenario: Scenario, setup: Setup, draws: Draws) -> SimResult:
-    """Simulate a prepared run (:func:`prepare`)."""
+def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
+    """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
     sim = scenario.simulation
-    return simulate(
-        DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws,
-        n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
-        disturbance=setup.disturbance, noise=setup.noise, divergence_error=sim.divergence_error,
-    )
+    plant = DynamicPlant(setup.plant_params)
+    steps = {"n_steps": sim.n_steps, "control_period": sim.control_period, "substeps": sim.substeps,
+             "divergence_error": sim.divergence_error}
+    if batched:
+        return simulate_batch(plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance,
+                              setup.noise, **steps)
+    return simulate(plant, setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws,
+                    disturbance=setup.disturbance, noise=setup.noise, **steps)
 
 
 def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 64,
@@ -165,11 +164,7 @@ def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 6
         chunk = list(seeds[start:start + chunk_size])
         padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
         setup, draws = prepare_batch(scenario, padded)
-        result = simulate_batch(DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, setup.x0,
-                                draws, setup.disturbance, setup.noise, n_steps=sim.n_steps,
-                                control_period=sim.control_period, substeps=sim.substeps,
-                                divergence_error=sim.divergence_error)
-        result = jax.tree_util.tree_map(np.asarray, result)
+        result = jax.tree_util.tree_map(np.asarray, run_setup(scenario, setup, draws, batched=True))
         for i, seed in enumerate(chunk):
             single = row(result, i)
             metrics = summarize(timeseries(single), status=single.status_name, window=sim.window,
