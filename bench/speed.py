@@ -150,6 +150,16 @@ def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, 
 
     python = timings(lambda: run_backstepping(**params), python_repeats)
 
+    # NN-adaptive: the control loop of one run (emulator training and gain law every period); its
+    # identification phase is a separate one-off cost, timed apart (compile excluded in both)
+    from ddtrack.runner import run_setup
+
+    nn_scenario = ddtrack.load_scenario(SCENARIO, controller="nn_adaptive_backstepping")
+    nn_setup, nn_draws = ddtrack.prepare(nn_scenario)
+    nn_identify = timings(lambda: jax.block_until_ready(ddtrack.prepare(nn_scenario)[0].identification), 2)
+    jax.block_until_ready(run_setup(nn_scenario, nn_setup, nn_draws))
+    single_nn = timings(lambda: jax.block_until_ready(run_setup(nn_scenario, nn_setup, nn_draws)), repeats)
+
     figures: dict[str, object] = {
         "scenario": str(SCENARIO.relative_to(ROOT)),
         "n_steps": sim.n_steps,
@@ -162,6 +172,9 @@ def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, 
         "single_bs_min_s": min(single),
         "simulate_only_s": statistics.median(simulate),
         "simulate_only_min_s": min(simulate),
+        "single_nn_s": statistics.median(single_nn),
+        "single_nn_min_s": min(single_nn),
+        "nn_identification_s": statistics.median(nn_identify),
         "python_loop_bs_s": statistics.median(python),
         "python_loop_bs_min_s": min(python),
         "ratio_python_over_ddtrack": statistics.median(python) / statistics.median(single),
@@ -233,6 +246,8 @@ ROWS = [
     ("compile_s", "compile (first ddtrack.run minus steady)"),
     ("single_bs_s", "ddtrack.run, one line-case run"),
     ("simulate_only_s", "  of which ddtrack.simulate"),
+    ("single_nn_s", "NN-adaptive run (identification apart)"),
+    ("nn_identification_s", "NN identification phase"),
     ("python_loop_bs_s", "plain Python loop, same run"),
     ("ratio_python_over_ddtrack", "speed-up python / ddtrack (target >= 10)"),
     ("batch_s", "vmap batch"),
