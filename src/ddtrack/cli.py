@@ -17,17 +17,9 @@ LISTS = ("controllers", "trajectories", "disturbances")
 
 
 def _enable_compilation_cache() -> None:
-    """JAX's persistent cache makes the second ``ddtrack run`` skip most of the compile."""
-    import jax
+    from .runner import enable_compilation_cache
 
-    root = os.environ.get("DDTRACK_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
-    try:
-        cache = Path(root) / "jax"
-        cache.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return  # a read-only home only costs compile time
-    jax.config.update("jax_compilation_cache_dir", str(cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)  # prepare()'s small jits add 0.4 s otherwise
+    enable_compilation_cache()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -185,6 +177,68 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
     click.echo(format_summary(summary, n))
     click.echo(f"wrote {out}/runs.parquet, runs.csv, summary.json")
     return 0
+
+
+@cli.command()
+@click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
+@click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tls://10.0.0.5:8786.")
+@click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
+              help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file).")
+@click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
+              help="Worker processes of the embedded local cluster [default: CPU count].")
+def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> int:
+    """Run a parameter sweep (SWEEP.toml, see docs/sweeps.md) on Dask, resumably.
+
+    Without --scheduler or --scheduler-file, an embedded cluster on 127.0.0.1 runs it.
+    """
+    if scheduler is not None and scheduler_file is not None:
+        raise ConfigError("--scheduler", "give --scheduler or --scheduler-file, not both")
+    if workers is not None and (scheduler is not None or scheduler_file is not None):
+        raise ConfigError("--workers", "only applies to the embedded cluster",
+                          "start workers on the cluster with `dask worker` instead")
+    if scheduler_file is not None and not scheduler_file.is_file():
+        raise ConfigError("--scheduler-file", f"'{scheduler_file}' does not exist",
+                          "start the scheduler with `dask scheduler --scheduler-file FILE` first")
+    from .sweep import local_cluster, plan_sweep, read_sweep, run_sweep
+
+    spec = read_sweep(sweep_file)
+    plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing
+    from .rundir import check_writable
+
+    check_writable(out)
+    from distributed import Client
+
+    progress = sys.stderr.isatty()
+
+    def report(done: int, total: int) -> None:
+        if progress:
+            click.echo(f"\r{done}/{total} runs", nl=False, err=True)
+
+    cluster = None
+    try:
+        if scheduler is not None or scheduler_file is not None:
+            try:
+                client = Client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
+                                timeout="20s")
+            except (OSError, TimeoutError) as exc:
+                raise RunError(f"cannot reach the Dask scheduler ({exc})") from None
+        else:
+            cluster = local_cluster(workers or os.cpu_count() or 1)
+            client = Client(cluster)
+        with client:
+            outcome = run_sweep(plan, out, client, on_record=report)
+    finally:
+        if cluster is not None:
+            cluster.close()
+    if progress:
+        click.echo("", err=True)
+    click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
+               f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
+               f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
+    click.echo(f"wrote {out}/results.parquet, results.csv")
+    return 1 if outcome.errors or outcome.not_ok else 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -136,7 +136,7 @@ def table_markdown(table: dict) -> str:
                 f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'], digits=2)} | "
                 f"{_fmt(gain, digits=1) if gain else ''} | "
                 f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |")
-    lines += ["", f"Statistic: mean of e_tr over each case's metric window (SPEC 4.4): "
+    lines += ["", "Statistic: mean of e_tr over each case's metric window (SPEC 4.4): "
               + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())
               + ". Improvement: 100 (E_BS - E_NN) / E_BS, paired by seed.", ""]
     return "\n".join(lines)

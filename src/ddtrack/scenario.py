@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal, Union
 
 import jax
 import jax.numpy as jnp
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, model_validator
 
 from .controllers import (
     Backstepping,

@@ -23,7 +23,7 @@ def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
 
 def kanayama_command_rate(error: Array, nu: Array, ref: Reference, gains: Array) -> Array:
     """Analytic d nu_c / dt with the gains held and the measured nu in the error dynamics (SPEC 2.5)."""
-    e_x, e_y, e_th = error[0], error[1], error[2]
+    e_y, e_th = error[1], error[2]
     kx, ky, kth = gains[0], gains[1], gains[2]
     de_x, de_y, de_th = error_rates(error, nu[0], nu[1], ref.v, ref.omega)
     v_dot = ref.v_dot * jnp.cos(e_th) - ref.v * jnp.sin(e_th) * de_th + kx * de_x
