@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import ddtrack  # noqa: F401  (turns on float64 before any test builds an array)
@@ -10,6 +11,16 @@ from ddtrack.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
+
+
+def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
+    """d f / d x by central differences, one column per component of ``x``."""
+    columns = []
+    for j in range(x.size):
+        step = np.zeros_like(x)
+        step[j] = h
+        columns.append((np.asarray(f(x + step)) - np.asarray(f(x - step))) / (2 * h))
+    return np.stack(columns, axis=-1)
 
 
 @pytest.fixture

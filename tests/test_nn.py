@@ -13,6 +13,7 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 import ddtrack  # noqa: F401  (float64)
+from conftest import central_difference
 from ddtrack import geometry
 from ddtrack.controllers import MLP, Emulator, Scales, emulator_scales, init_mlp, nn
 from ddtrack.controllers.nn import forward, zeros_like
@@ -43,16 +44,6 @@ def random_scales(rng, n_in: int = 4, n_out: int = 3) -> Scales:
 
 def leaves(tree) -> np.ndarray:
     return np.concatenate([np.ravel(np.asarray(x)) for x in jax.tree_util.tree_leaves(tree)])
-
-
-def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
-    """d f / d x, columns by central differences."""
-    columns = []
-    for j in range(x.size):
-        step = np.zeros_like(x)
-        step[j] = h
-        columns.append((np.asarray(f(x + step)) - np.asarray(f(x - step))) / (2 * h))
-    return np.stack(columns, axis=-1)
 
 
 # --- item 21: input-output Jacobian ----------------------------------------------------------------

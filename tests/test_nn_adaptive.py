@@ -17,6 +17,7 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 import ddtrack
+from conftest import central_difference
 from ddtrack.controllers import (
     AdaptiveMemory,
     ComputedTorque,
@@ -85,15 +86,6 @@ def random_error(rng) -> np.ndarray:
 def body_basis(theta) -> jnp.ndarray:
     """S(theta) = [[c, 0], [s, 0], [0, 1]]: the first and last columns of R_3(theta)."""
     return rotation(jnp.asarray(theta))[:, jnp.array([0, 2])]
-
-
-def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
-    columns = []
-    for j in range(x.size):
-        step = np.zeros_like(x)
-        step[j] = h
-        columns.append((np.asarray(f(x + step)) - np.asarray(f(x - step))) / (2 * h))
-    return np.stack(columns, axis=-1)
 
 
 # --- item 14: Lambda = 0 is backstepping --------------------------------------------------------------

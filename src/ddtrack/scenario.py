@@ -574,21 +574,7 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
         naming the field and the fix, for any problem with the file or the overrides.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise ConfigError("", f"scenario file '{path}' does not exist",
-                          "check the path; `ddtrack list` does not list files, see scenarios/") from None
-    except IsADirectoryError:
-        raise ConfigError("", f"'{path}' is a folder, not a scenario file", "give a .toml file") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError("", f"scenario file '{path}' is not UTF-8 (byte {exc.start})", "save it as UTF-8") from None
-    except OSError as exc:
-        raise ConfigError("", f"scenario file '{path}' cannot be read: {exc.strerror}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("", f"'{path}' is not valid TOML: {exc}", "see docs/scenarios.md for the format") from None
+    data = read_toml(path, "scenario", "docs/scenarios.md")
     for override in overrides:
         apply_override(data, override)
     if seed is not None:
@@ -600,6 +586,25 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
         if isinstance(section, dict):
             section["kind"] = controller
     return validate_scenario(data, base_dir=path.parent)
+
+
+def read_toml(path: Path, what: str, reference: str) -> dict[str, Any]:
+    """Read a TOML file; every problem (missing, a folder, not UTF-8, unreadable, not TOML) is a
+    :class:`ConfigError` saying which ``what`` file and pointing to the ``reference`` document."""
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise ConfigError("", f"{what} file '{path}' does not exist", "check the path") from None
+    except IsADirectoryError:
+        raise ConfigError("", f"'{path}' is a folder, not a {what} file", "give a .toml file") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError("", f"{what} file '{path}' is not UTF-8 (byte {exc.start})", "save it as UTF-8") from None
+    except OSError as exc:
+        raise ConfigError("", f"{what} file '{path}' cannot be read: {exc.strerror}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("", f"'{path}' is not valid TOML: {exc}", f"see {reference} for the format") from None
 
 
 def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Scenario:

@@ -18,7 +18,6 @@ import io
 import itertools
 import json
 import math
-import tomllib
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from .errors import ConfigError, did_you_mean
 from .rundir import atomic_write
 from .runner import enable_compilation_cache, monte_carlo
-from .scenario import FieldError, Scenario, load_scenario, to_toml_dict
+from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
 
 RECORDS = "records"
 ERROR = "error"  #: status of a run whose task raised; such runs are retried when the sweep restarts
@@ -153,18 +152,7 @@ def _flatten(table: Any, prefix: str = "", *, leaf: Callable[[dict], bool] = lam
 def read_sweep(path: str | Path) -> SweepFile:
     """Read and validate a sweep file; every problem is a :class:`ConfigError` naming the field."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise ConfigError("", f"sweep file '{path}' does not exist", "check the path") from None
-    except IsADirectoryError:
-        raise ConfigError("", f"'{path}' is a folder, not a sweep file", "give a .toml file") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError("", f"sweep file '{path}' is not UTF-8 (byte {exc.start})", "save it as UTF-8") from None
-    except OSError as exc:
-        raise ConfigError("", f"sweep file '{path}' cannot be read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("", f"'{path}' is not valid TOML: {exc}", "see docs/sweeps.md for the format") from None
+    data = read_toml(path, "sweep", "docs/sweeps.md")
     for name in ("grid", "set"):
         if isinstance(data.get(name), dict):
             data[name] = _flatten(data[name])
