@@ -38,8 +38,10 @@ def test_run_writes_the_documented_folder(paper_line_run):
     assert figures == ["errors.png", "path.png", "states.png", "torques.png"]
     for png in (out / "figures").iterdir():
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
-    mode = stat.S_IMODE((out / "metrics.json").stat().st_mode)
-    assert mode & stat.S_IRGRP or os.umask(0o022) & stat.S_IRGRP  # follows the umask, not mkstemp's 0600
+    mask = os.umask(0)
+    os.umask(mask)
+    for written in (out / "metrics.json", out / "timeseries.parquet", out / "figures" / "path.png"):
+        assert stat.S_IMODE(written.stat().st_mode) == 0o666 & ~mask  # the umask's mode, not mkstemp's 0600
 
 
 def test_timeseries_columns_and_types(paper_line_run):
@@ -146,7 +148,7 @@ def test_adaptive_run_writes_gains_and_identification(tmp_path, cli):
     code, stdout, _ = cli("run", SCENARIOS / "paper_line.toml", "--controller", "nn_adaptive_backstepping",
                           "--set", "controller.epochs=5", "--out", out)
     assert code == 0 and "nn_adaptive_backstepping" in stdout
-    assert (out / "figures" / "gains.png").stat().st_size > 10_000
+    assert (out / "figures" / "gains.png").stat().st_size > 10_000  # gains that moved get their figure
     found = json.loads((out / "identification.json").read_text())
     assert found["epochs"] == 5 and len(found["epoch_loss"]) == 5 and found["samples"] == 5999
     assert found["epoch_loss"][-1] < found["epoch_loss"][0]  # pre-training learns
@@ -184,8 +186,8 @@ def test_reproduce_exits_1_when_the_adaptive_controller_loses(tmp_path, cli, mon
     import ddtrack.reproduce as reproduce_module
 
     losing = {"seeds": 1, "elapsed_s": 0.0, "cases": {
-        "paper_line": {"improvement": {"nn_adaptive": {"mean": -3.0}}},
-        "paper_square": {"improvement": {"nn_adaptive": {"mean": 12.0}}},
+        "paper_line": {"improvement": {"nn_adaptive": {"mean": -3.0, "missing": 0}}},
+        "paper_square": {"improvement": {"nn_adaptive": {"mean": 12.0, "missing": 0}}},
     }}
     monkeypatch.setattr(reproduce_module, "reproduce", lambda out, **_: losing)
     monkeypatch.setattr(reproduce_module, "table_markdown", lambda table: "table")

@@ -139,3 +139,20 @@ def test_ci_runs_the_readme_test_command():
     assert "pytest" in test_command
     ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()
     assert ci[-1] == test_command
+
+
+def test_torque_columns_come_from_the_plant_kind():
+    from ddtrack.controllers import Backstepping
+    from ddtrack.model import KinematicPlant
+    from ddtrack.sim import Draws
+    from ddtrack.trajectories import Line
+
+    line = Line(heading=0.3, speed=0.5)
+    x0 = jnp.array([0.0, 0.2, 0.0, 0.0, 0.0])
+    kinematic = ddtrack.simulate(KinematicPlant(), Backstepping(), line, x0, Draws.zeros(50), n_steps=50)
+    columns = ddtrack.timeseries(kinematic)
+    assert np.all(np.isnan(columns["tau_r"])) and np.all(np.isnan(columns["tau_l"]))  # a velocity input has no torque
+    assert np.array_equal(columns["v_cmd"], np.asarray(kinematic.control[:, 0]))
+    dynamic = ddtrack.run(ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=_short(1)))
+    columns = ddtrack.timeseries(dynamic)
+    assert np.array_equal(columns["tau_r"], np.asarray(dynamic.control[:, 0]))

@@ -12,14 +12,9 @@ from pathlib import Path
 import click
 
 from .errors import ConfigError, RunError
+from .runner import enable_compilation_cache
 
 LISTS = ("controllers", "trajectories", "disturbances")
-
-
-def _enable_compilation_cache() -> None:
-    from .runner import enable_compilation_cache
-
-    enable_compilation_cache()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -44,7 +39,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     from .rundir import check_writable
 
     check_writable(folder)  # before spending time on the simulation
-    _enable_compilation_cache()
+    enable_compilation_cache()
     from .metrics import summarize
     from .rundir import write_run
     from .runner import prepare, run_setup
@@ -122,7 +117,7 @@ def reproduce(out: Path, seeds: int, ablations: bool) -> int:
     from .rundir import check_writable
 
     check_writable(out)
-    _enable_compilation_cache()
+    enable_compilation_cache()
     from .reproduce import nn_beats_backstepping
     from .reproduce import reproduce as run_reproduce
     from .reproduce import table_markdown
@@ -162,7 +157,7 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
 
     specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
     check_writable(out)
-    _enable_compilation_cache()
+    enable_compilation_cache()
     progress = sys.stderr.isatty()
 
     def report(name: str, done: int) -> None:

@@ -7,7 +7,6 @@ import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
 import pyarrow as pa
 import pyarrow.csv  # noqa: F401  (pa.csv)
 import pyarrow.parquet as pq
@@ -47,12 +46,6 @@ def run_specs(specs: dict[str, Scenario], *, n: int, seed: int = 0, chunk_size: 
             for name, spec in specs.items()}
 
 
-def _ci(values: list) -> dict:
-    finite = [v for v in values if v is not None]
-    summary = mean_ci(np.asarray(finite)) if finite else {"mean": None, "ci_low": None, "ci_high": None, "n": 0}
-    return summary | {"missing": len(values) - len(finite)}
-
-
 def summarise(rows: dict[str, list[dict]]) -> dict:
     """Mean and 95 % CI of every statistic per controller, and the paired improvement of each controller's
     mean tracking error over the first controller's (seeds where both runs succeeded)."""
@@ -60,12 +53,12 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
     baseline = rows[names[0]]
     summary: dict = {"controllers": {}, "improvement_over": names[0], "improvement": {}}
     for name, runs in rows.items():
-        summary["controllers"][name] = {key: _ci([r[key] for r in runs]) for key in STATISTICS}
+        summary["controllers"][name] = {key: mean_ci([r[key] for r in runs]) for key in STATISTICS}
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
         if name != names[0]:
             paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) for b, r in zip(baseline, runs, strict=True)
                       if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0]
-            summary["improvement"][name] = _ci(paired) | {"paired_runs": len(paired)}
+            summary["improvement"][name] = mean_ci(paired) | {"paired_runs": len(paired)}
     return summary
 
 

@@ -61,17 +61,24 @@ def improvement(baseline: float, candidate: float) -> float:
     return 100.0 * (baseline - candidate) / baseline
 
 
-def mean_ci(values: np.ndarray, confidence: float = 0.95) -> dict[str, float | None]:
-    """Mean and the two-sided Student-t confidence interval of the mean over independent values
-    (seeds); the interval is None with fewer than two values."""
+def mean_ci(values, confidence: float = 0.95) -> dict:
+    """Mean and the two-sided Student-t confidence interval of the mean over independent values (seeds).
+
+    None entries (a failed run, a settling time never reached) are left out and counted as ``missing``;
+    the mean is None when nothing is left, the interval None with fewer than two values.
+    """
     from scipy import stats
 
-    values = np.asarray(values, dtype=float)
-    mean = float(np.mean(values))
-    if values.size < 2:
-        return {"mean": mean, "ci_low": None, "ci_high": None, "n": int(values.size)}
-    half = float(stats.t.ppf(0.5 + confidence / 2, values.size - 1) * np.std(values, ddof=1) / np.sqrt(values.size))
-    return {"mean": mean, "ci_low": mean - half, "ci_high": mean + half, "n": int(values.size)}
+    present = np.asarray([v for v in values if v is not None], dtype=float)
+    summary = {"mean": None, "ci_low": None, "ci_high": None, "n": int(present.size),
+               "missing": len(values) - int(present.size)}
+    if present.size:
+        summary["mean"] = float(np.mean(present))
+    if present.size >= 2:
+        half = float(stats.t.ppf(0.5 + confidence / 2, present.size - 1) * np.std(present, ddof=1)
+                     / np.sqrt(present.size))
+        summary |= {"ci_low": summary["mean"] - half, "ci_high": summary["mean"] + half}
+    return summary
 
 
 def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,

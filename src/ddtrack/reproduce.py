@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib.pyplot as plt
-import numpy as np
 
 from .metrics import improvement, mean_ci, summarize
 from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
@@ -87,11 +86,9 @@ def run_case(name: str, seeds: int, variants: dict[str, list[str]],
     return result
 
 
-def _stat(runs: list[dict], key: str) -> dict:
-    values = [r[key] for r in runs]
-    if any(v is None for v in values):
-        return {"mean": None, "ci_low": None, "ci_high": None, "n": len(values), "values": values}
-    return mean_ci(np.asarray(values)) | {"values": values}
+def _with_values(values: list) -> dict:
+    """:func:`mean_ci` plus the per-seed values, so the table can be re-derived from the JSON."""
+    return mean_ci(values) | {"values": values}
 
 
 def summarise_case(name: str, case: CaseResult) -> dict:
@@ -100,22 +97,20 @@ def summarise_case(name: str, case: CaseResult) -> dict:
     entry: dict = {"title": CASES[name], "window": list(case.scenario.simulation.window),
                    "paper": PAPER_TABLE[name], "controllers": {}, "improvement": {}}
     for variant, runs in case.metrics.items():
-        entry["controllers"][variant] = {key: _stat(runs, key) for key in STATISTICS}
+        entry["controllers"][variant] = {key: _with_values([r[key] for r in runs]) for key in STATISTICS}
         entry["controllers"][variant]["status"] = [r["status"] for r in runs]
         if runs[0].get("final_gains") is not None and variant != "backstepping":
             entry["controllers"][variant]["final_gains"] = [r["final_gains"] for r in runs]
         if variant != "backstepping":
             paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) if r["e_tr_mean"] is not None else None
                       for b, r in zip(baseline, runs, strict=True)]
-            entry["improvement"][variant] = (mean_ci(np.asarray(paired)) | {"values": paired}
-                                             if None not in paired else {"mean": None, "values": paired})
+            entry["improvement"][variant] = _with_values(paired)
     return entry
 
 
 def _fmt(stat: dict, scale: float = 1.0, digits: int = 4) -> str:
-    if stat["mean"] is None:  # a failed run, or a settling time never reached, in some seeds
-        missing = sum(v is None for v in stat.get("values", []))
-        return f"n/a in {missing} of {len(stat.get('values', []))} seeds"
+    if stat["missing"]:  # a failed run, or a settling time never reached, in some seeds: no mean over the rest
+        return f"n/a in {stat['missing']} of {stat['n'] + stat['missing']} seeds"
     text = f"{stat['mean'] * scale:.{digits}f}"
     if stat.get("ci_low") is not None:
         text += f" [{stat['ci_low'] * scale:.{digits}f}, {stat['ci_high'] * scale:.{digits}f}]"
@@ -204,6 +199,6 @@ def nn_beats_backstepping(table: dict) -> dict[str, bool]:
     """Per case: does NN-adaptive backstepping have a lower mean error than backstepping (mean over seeds)?"""
     verdict = {}
     for name, entry in table["cases"].items():
-        gain = entry["improvement"]["nn_adaptive"]["mean"]
-        verdict[name] = gain is not None and gain > 0.0
+        gain = entry["improvement"]["nn_adaptive"]
+        verdict[name] = not gain["missing"] and gain["mean"] > 0.0  # a failed seed is a loss too
     return verdict

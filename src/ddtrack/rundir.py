@@ -81,8 +81,8 @@ def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray
         "errors.png": plot_errors(columns, window=window),
         "torques.png": plot_torques(columns, max_torque=scenario.plant_params().max_torque),
     }
-    if "emulator_loss" in columns:  # an adaptive controller: its gains (the paper's Figs. 13 and 17)
-        figures["gains.png"] = plot_gains(columns)
+    if any(name in columns and np.ptp(columns[name]) > 0 for name in ("kx", "ky", "ktheta")):
+        figures["gains.png"] = plot_gains(columns)  # gains that moved (the paper's Figs. 13 and 17)
     for name, fig in figures.items():
         put(f"figures/{name}", lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
         plt.close(fig)

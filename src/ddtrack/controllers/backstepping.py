@@ -47,6 +47,16 @@ def clamp_command(nu_c: Array, nu_c_dot: Array, limits: Array) -> tuple[Array, A
             jnp.any(clamped).astype(nu_c.dtype))
 
 
+def velocity_command(error: Array, nu: Array, ref: Reference, gains: Array, limits: Array,
+                     strict: bool) -> VelocityCommand:
+    """The Kanayama command for ``gains``, its analytic rate, the clamps, and (``strict``) the cross term
+    [e_x, sin(e_th)/Ky] for the inner loop: what every Kanayama-based outer law hands the inner loop."""
+    nu_c, nu_c_dot, saturated = clamp_command(kanayama_command(error, ref, gains),
+                                              kanayama_command_rate(error, nu, ref, gains), limits)
+    feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if strict else jnp.zeros(2)
+    return VelocityCommand(nu_c, nu_c_dot, feedback, saturated)
+
+
 @pytree_dataclass
 class Backstepping:
     """Kanayama backstepping velocity law (paper eq. 12; SPEC 2.4, 2.5).
@@ -75,13 +85,9 @@ class Backstepping:
     def command(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[VelocityCommand, tuple[()], Logs]:
         gains = self.gains
         error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
-        nu_c = kanayama_command(error, ref, gains)
-        nu_c_dot = kanayama_command_rate(error, y[3:5], ref, gains)
         limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
-        nu_c, nu_c_dot, saturated = clamp_command(nu_c, nu_c_dot, limits)
-        feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if self.strict else jnp.zeros(2)
-        logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2]}
-        return VelocityCommand(nu_c, nu_c_dot, feedback, saturated), memory, logs
+        command = velocity_command(error, y[3:5], ref, gains, limits, self.strict)
+        return command, memory, {"kx": gains[0], "ky": gains[1], "ktheta": gains[2]}
 
     def observe(self, memory: tuple[()], saturated: Array) -> tuple[()]:
         return memory

@@ -23,7 +23,7 @@ from jax import Array
 from .._pytree import pytree_dataclass, static_field
 from ..geometry import body_increment, posture_error
 from ..trajectories import Reference
-from .backstepping import clamp_command, kanayama_command, kanayama_command_rate
+from .backstepping import kanayama_command, velocity_command
 from .base import Logs, VelocityCommand
 from .nn import MLP, Scales, backprop, input_jacobian, momentum_step, sample_loss, zeros_like
 
@@ -180,17 +180,13 @@ class NNAdaptiveBackstepping:
         step = jnp.where(gate, jnp.clip(step, -jnp.asarray(self.max_step), jnp.asarray(self.max_step)), 0.0)
         gains = jnp.clip(gains + step, jnp.asarray(self.gain_min), jnp.asarray(self.gain_max))
 
-        # the Kanayama command with the new gains
-        nu_c = kanayama_command(error, ref, gains)
-        nu_c_dot = kanayama_command_rate(error, nu, ref, gains)
-        nu_c, nu_c_dot, saturated = clamp_command(nu_c, nu_c_dot, limits)
-        feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if self.strict else jnp.zeros(2)
-
-        memory = AdaptiveMemory(gains, step, mlp, mlp_velocity, y[:3], self.emulator.inputs(nu_c, nu),
-                                saturated, jnp.asarray(1.0))
+        # the Kanayama command with the new gains: the backstepping law's own code (so rates = 0 is it, bit for bit)
+        command = velocity_command(error, nu, ref, gains, limits, self.strict)
+        memory = AdaptiveMemory(gains, step, mlp, mlp_velocity, y[:3], self.emulator.inputs(command.nu_c, nu),
+                                command.saturated, jnp.asarray(1.0))
         logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2], "emulator_loss": loss,
                 "jacobian_v": jb[0, 0], "jacobian_omega": jb[2, 1], "gate": gate.astype(float)}
-        return VelocityCommand(nu_c, nu_c_dot, feedback, saturated), memory, logs
+        return command, memory, logs
 
     def observe(self, memory: AdaptiveMemory, saturated: Array) -> AdaptiveMemory:
         """Record whether the inner loop saturated this period, for the next period's gate."""

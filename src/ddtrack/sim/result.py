@@ -64,13 +64,12 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     logs = {name: np.asarray(value, dtype=float)[rows] for name, value in result.logs.items()}
     ref = {name: np.asarray(value, dtype=float)[rows] for name, value in result.reference._asdict().items()}
     nan = np.full(n, np.nan)
-    is_torque = "v_cmd" in logs  # a cascade logs its velocity command; its control is torque
     columns = {
         "t": np.asarray(result.t, dtype=float)[rows],
         "x": state[:, 0], "y": state[:, 1], "theta": state[:, 2], "v": state[:, 3], "omega": state[:, 4],
         "x_ref": ref["x"], "y_ref": ref["y"], "theta_ref": ref["theta"], "v_ref": ref["v"], "omega_ref": ref["omega"],
         "e_x": error[:, 0], "e_y": error[:, 1], "e_theta": error[:, 2], "e_tr": np.hypot(error[:, 0], error[:, 1]),
         "v_cmd": logs.pop("v_cmd", control[:, 0]), "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
-        "tau_r": control[:, 0] if is_torque else nan, "tau_l": control[:, 1] if is_torque else nan,
+        "tau_r": logs.pop("tau_r", nan), "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
     }
     return columns | logs

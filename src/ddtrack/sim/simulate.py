@@ -87,7 +87,8 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
         keep = new_status == 0
         x_next = jnp.where(keep, x_next, x)
         next_memory = jax.tree_util.tree_map(lambda new, old: jnp.where(keep, new, old), next_memory, memory)
-        record = (x, ref, error, u, {name: jnp.asarray(value, float) for name, value in logs.items()})
+        torques = {"tau_r": u[0], "tau_l": u[1]} if plant.input_kind == "torque" else {}
+        record = (x, ref, error, u, {name: jnp.asarray(value, float) for name, value in (logs | torques).items()})
         return (x_next, next_memory, new_status, failure_index), record
 
     steps = jnp.arange(n_steps)
