@@ -193,3 +193,15 @@ def test_reproduce_exits_1_when_the_adaptive_controller_loses(tmp_path, cli, mon
     monkeypatch.setattr(reproduce_module, "table_markdown", lambda table: "table")
     code, _, stderr = cli("reproduce", "--out", tmp_path / "r")
     assert code == 1 and "does not beat backstepping on: paper_line" in stderr
+
+
+def test_an_overlaid_path_keeps_the_title(paper_line_run):
+    from ddtrack.plotting import plot_path
+
+    _, out = paper_line_run
+    table = pq.read_table(out / "timeseries.parquet")
+    columns = {name: table.column(name).to_numpy() for name in table.column_names}
+    fig = plot_path(columns, title="Case 1")
+    plot_path(columns, ax=fig.axes[0], label="again", reference=False)
+    assert fig.axes[0].get_title() == "Case 1"
+    assert [line.get_label() for line in fig.axes[0].lines][-1] == "again"

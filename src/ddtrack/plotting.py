@@ -38,13 +38,16 @@ def plot_path(columns: Columns, ax: Axes | None = None, *, title: str = "", labe
 
     Call again with ``ax`` and ``reference=False`` to overlay another run.
     """
+    new = ax is None
     fig, ax = _axes(ax, figsize=(6, 6), layout="constrained")
     if reference:
         ax.plot(columns["x_ref"], columns["y_ref"], "--", color=REFERENCE, lw=1.2, label="reference")
         ax.plot(columns["x_ref"][0], columns["y_ref"][0], "s", color=REFERENCE, ms=5, mfc="none")
         ax.plot(columns["x"][0], columns["y"][0], "o", color=color, ms=6, label="start")
     ax.plot(columns["x"], columns["y"], color=color, lw=1.6, label=label)
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title=title or "path")
+    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
+    if title or new:  # an overlay keeps the figure's title
+        ax.set_title(title or "path")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     return fig
