@@ -2,6 +2,10 @@
 from __future__ import annotations
 
 import json
+import os
+import pty
+import subprocess
+import sys
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -71,10 +75,11 @@ def test_summary_pairs_runs_by_seed():
 
 def test_mc_command_writes_its_tables(tmp_path, cli):
     out = tmp_path / "mc"
-    code, stdout, _ = cli("mc", SCENARIOS / "figure_eight.toml", "-n", "4", "--controllers", "backstepping",
+    code, stdout, stderr = cli("mc", SCENARIOS / "figure_eight.toml", "-n", "4", "--controllers", "backstepping",
                           "--vary", "mass=uniform:0.2", *[a for s in SHORT for a in ("--set", s)], "--chunk", "3",
                           "--out", out)
     assert code == 0 and "4 runs per controller" in stdout and "e_tr_mean" in stdout
+    assert stderr == ""  # no progress bar when stderr is not a terminal
     table = pq.read_table(out / "runs.parquet")
     assert table.num_rows == 4 and table.column("seed").to_pylist() == [0, 1, 2, 3]
     assert {"controller", "plant_mass", "e_tr_mean", "status", "effort"} <= set(table.column_names)
@@ -93,3 +98,28 @@ def test_mc_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", *args, "--out", tmp_path / "mc")
     assert code == 2 and stderr.startswith(f"error: {field}")
     assert not (tmp_path / "mc").exists()
+
+
+def test_mc_shows_a_progress_bar_on_a_terminal(tmp_path):
+    """On a (pseudo-)terminal stderr, ``mc`` draws rich's bar from 0 to the last run."""
+    leader, follower = pty.openpty()
+    args = [sys.executable, "-m", "ddtrack", "mc", str(SCENARIOS / "figure_eight.toml"), "-n", "4", "--chunk", "2",
+            *[a for s in SHORT for a in ("--set", s)], "--out", str(tmp_path / "mc")]
+    with subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=follower,
+                          env={**os.environ, "COLUMNS": "100", "TERM": "xterm"}) as process:
+        os.close(follower)
+        screen = b""
+        while True:
+            try:
+                chunk = os.read(leader, 4096)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not chunk:
+                break
+            screen += chunk
+        stdout = process.stdout.read().decode()
+    os.close(leader)
+    assert process.returncode == 0, screen.decode(errors="replace")
+    text = screen.decode(errors="replace")
+    assert "0/4" in text and "4/4" in text and "backstepping" in text and "━" in text
+    assert "4/4" not in stdout and "runs per controller" in stdout  # the bar stays off the results

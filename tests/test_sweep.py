@@ -6,6 +6,7 @@ import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -361,3 +362,14 @@ def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
             assert records[key]["configuration"]["overrides"] == configuration.overrides
             for name in METRICS:
                 assert records[key]["metrics"][name] == pytest.approx(row[name], rel=0, abs=1e-12)
+
+
+def test_unreachable_scheduler_exits_2_and_leaves_no_folder(tmp_path, cli):
+    sweep_file = write_sweep(tmp_path)
+    with socket.socket() as closed:  # a loopback port that nothing listens on
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    code, _, stderr = cli("sweep", sweep_file, "--out", tmp_path / "out" / "sweep",
+                          "--scheduler", f"tcp://127.0.0.1:{port}")
+    assert code == 2 and "cannot reach the Dask scheduler" in stderr
+    assert not (tmp_path / "out").exists()

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
@@ -158,15 +159,9 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
     specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
     check_writable(out)
     enable_compilation_cache()
-    progress = sys.stderr.isatty()
-
-    def report(name: str, done: int) -> None:
-        if progress:
-            click.echo(f"\r{name}: {done}/{n} runs", nl=False, err=True)
-
-    rows = run_specs(specs, n=n, seed=seed, chunk_size=chunk, on_chunk=report)
-    if progress:
-        click.echo("", err=True)
+    with progress_bar(n * len(names), "runs") as advance:
+        rows = run_specs(specs, n=n, seed=seed, chunk_size=chunk,
+                         on_chunk=lambda name, done: advance(names.index(name) * n + done, name))
     summary = summarise(rows)
     write(out, rows, summary)
     click.echo(format_summary(summary, n))
@@ -205,12 +200,6 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
     check_writable(out)
     from distributed import Client
 
-    progress = sys.stderr.isatty()
-
-    def report(done: int, total: int) -> None:
-        if progress:
-            click.echo(f"\r{done}/{total} runs", nl=False, err=True)
-
     cluster = None
     try:
         if scheduler is not None or scheduler_file is not None:
@@ -222,18 +211,34 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
         else:
             cluster = local_cluster(workers or os.cpu_count() or 1)
             client = Client(cluster)
-        with client:
-            outcome = run_sweep(plan, out, client, on_record=report)
+        with client, progress_bar(len(plan.runs), "runs") as advance:
+            outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done))
     finally:
         if cluster is not None:
             cluster.close()
-    if progress:
-        click.echo("", err=True)
     click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
                f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
                f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
     click.echo(f"wrote {out}/results.parquet, results.csv")
     return 1 if outcome.errors or outcome.not_ok else 0
+
+
+@contextmanager
+def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
+    """A rich progress bar on stderr, yielding ``advance(completed, label=None)``; silent when stderr is not a
+    terminal, so logs, pipes and CI stay clean."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TextColumn("eta"), TimeRemainingColumn(), console=console, disable=not console.is_terminal) as bar:
+        task = bar.add_task(label, total=total)
+
+        def advance(completed: int, description: str | None = None) -> None:
+            bar.update(task, completed=completed, description=description or label)
+
+        yield advance
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -46,10 +46,15 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
 
 
 def check_writable(folder: Path) -> None:
-    """Fail early, before any simulation, if ``folder`` cannot be created or written."""
+    """Fail early, before any simulation, if ``folder`` cannot be created or written. Creates nothing: a
+    command that fails later (an unreachable scheduler, a diverged case) leaves no empty folder behind."""
+    existing = Path(folder).absolute()
+    while not existing.exists():
+        existing = existing.parent
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=folder):
+        if not existing.is_dir():
+            raise NotADirectoryError(20, "Not a directory", str(existing))
+        with tempfile.TemporaryFile(dir=existing):
             pass
     except OSError as exc:
         raise RunError(f"output folder '{folder}' cannot be written ({exc.strerror or exc}); "
