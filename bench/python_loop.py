@@ -13,8 +13,12 @@ closed loop as ``ddtrack.run`` on ``scenarios/paper_line.toml`` (SPEC 1.3, 2.2-2
   torque on the nominal model (eqs. 7, 11) and the torque limit.
 
 The loop (:func:`simulate`) takes the controller as a function ``step(t, y, ref, memory) ->
-(tau, memory)``, so another controller (e.g. the NN-adaptive law, SPEC 3.8) is one more
-``*_step`` function and one more ``run_*`` wrapper beside :func:`run_backstepping`.
+(tau, memory)``, so another controller is one more ``*_step`` function and one more ``run_*``
+wrapper beside :func:`run_backstepping`. The NN-adaptive backstepping law (SPEC 3, pseudo-code 3.8)
+is the second: :func:`run_nn_adaptive`, with the emulator network as nested lists of floats (forward
+pass, input Jacobian, online backpropagation with gradient clipping and momentum) and the gain law
+with its clip, bounds and gate, all in scalar loops. Its initial weights are ddtrack's (drawn from the
+seed, or identified): :func:`params_from_nn_setup` reads them from ``ddtrack.prepare``'s setup.
 
 Deliberately not here (ddtrack has them; they cost it a little): Gaussian disturbance and
 measurement noise (they need ddtrack's random streams), random plant draws, divergence/NaN checks,
@@ -26,12 +30,17 @@ Usage::
     from python_loop import params_from_scenario, run_backstepping
     states = run_backstepping(**params_from_scenario(ddtrack.load_scenario("scenarios/paper_line.toml")))
     states[-1]   # == ddtrack.run(...).state[-1] to about 1e-12
+
+    scenario = ddtrack.load_scenario("scenarios/paper_line.toml", controller="nn_adaptive_backstepping",
+                                     overrides=["controller.identification=false"])
+    setup, _ = ddtrack.prepare(scenario)
+    states = run_nn_adaptive(**params_from_nn_setup(scenario, setup))
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 State = tuple[float, float, float, float, float]  # x [m], y [m], theta [rad], v [m/s], omega [rad/s]
@@ -168,9 +177,27 @@ def kanayama(error: tuple[float, float, float], v: float, omega: float, ref: tup
     return v_c, omega_c, v_c_dot, omega_c_dot
 
 
+def clamp_command(v_c: float, omega_c: float, v_c_dot: float, omega_c_dot: float, max_velocity: float,
+                  max_yaw_rate: float) -> tuple[float, float, float, float, bool]:
+    """|v_c| <= v_max, |omega_c| <= w_max; a clamped channel's derivative is 0 (SPEC 2.5). Last: any clamped."""
+    saturated = False
+    if abs(v_c) > max_velocity:
+        v_c, v_c_dot, saturated = clamp(v_c, max_velocity), 0.0, True
+    if abs(omega_c) > max_yaw_rate:
+        omega_c, omega_c_dot, saturated = clamp(omega_c, max_yaw_rate), 0.0, True
+    return v_c, omega_c, v_c_dot, omega_c_dot, saturated
+
+
 def computed_torque(nominal: Robot, v: float, omega: float, v_c: float, omega_c: float, v_c_dot: float,
                     omega_c_dot: float, kc: tuple[float, float]) -> tuple[float, float]:
     """tau = B_bar^-1 (M_hat u + V_hat(nu) nu) + tau_f_hat, u = nu_c_dot + K_c (nu_c - nu), saturated (SPEC 2.5)."""
+    tau_r, tau_l = unsaturated_torque(nominal, v, omega, v_c, omega_c, v_c_dot, omega_c_dot, kc)
+    return clamp(tau_r, nominal.max_torque), clamp(tau_l, nominal.max_torque)
+
+
+def unsaturated_torque(nominal: Robot, v: float, omega: float, v_c: float, omega_c: float, v_c_dot: float,
+                       omega_c_dot: float, kc: tuple[float, float]) -> tuple[float, float]:
+    """:func:`computed_torque` before the torque limit (eqs. 7, 11)."""
     u_v = v_c_dot + kc[0] * (v_c - v)
     u_omega = omega_c_dot + kc[1] * (omega_c - omega)
     md = nominal.mass * nominal.com_offset
@@ -179,7 +206,7 @@ def computed_torque(nominal: Robot, v: float, omega: float, v_c: float, omega_c:
     r, half = nominal.wheel_radius, nominal.half_axle
     tau_r = r / 2.0 * (force + torque / half) + friction(nominal, (v + half * omega) / r)
     tau_l = r / 2.0 * (force - torque / half) + friction(nominal, (v - half * omega) / r)
-    return clamp(tau_r, nominal.max_torque), clamp(tau_l, nominal.max_torque)
+    return tau_r, tau_l
 
 
 def backstepping_step(nominal: Robot, gains: BacksteppingGains) -> Callable:
@@ -187,13 +214,176 @@ def backstepping_step(nominal: Robot, gains: BacksteppingGains) -> Callable:
 
     def step(t: float, y: State, ref: tuple, memory: Any) -> tuple[tuple[float, float], Any]:
         error = posture_error(y[0], y[1], y[2], ref[0], ref[1], ref[2])
-        v_c, omega_c, v_c_dot, omega_c_dot = kanayama(error, y[3], y[4], ref, gains.kx, gains.ky, gains.ktheta)
-        if abs(v_c) > gains.max_velocity:  # a clamped channel's derivative is 0 (SPEC 2.5)
-            v_c, v_c_dot = clamp(v_c, gains.max_velocity), 0.0
-        if abs(omega_c) > gains.max_yaw_rate:
-            omega_c, omega_c_dot = clamp(omega_c, gains.max_yaw_rate), 0.0
+        v_c, omega_c, v_c_dot, omega_c_dot, _ = clamp_command(
+            *kanayama(error, y[3], y[4], ref, gains.kx, gains.ky, gains.ktheta), gains.max_velocity, gains.max_yaw_rate)
         tau = computed_torque(nominal, y[3], y[4], v_c, omega_c, v_c_dot, omega_c_dot, gains.kc)
         return tau, memory
+
+    return step
+
+
+# --- NN-adaptive backstepping (SPEC 3) -----------------------------------------------------------
+
+
+@dataclass
+class Network:
+    """The emulator's weights as nested lists (SPEC 3.7): w1 (N_h x n_in), b1 (N_h), w2 (n_out x N_h), b2 (n_out)."""
+
+    w1: list[list[float]]
+    b1: list[float]
+    w2: list[list[float]]
+    b2: list[float]
+
+    def copy(self) -> Network:
+        return Network([row[:] for row in self.w1], self.b1[:], [row[:] for row in self.w2], self.b2[:])
+
+    def zeros(self) -> Network:
+        return Network([[0.0] * len(row) for row in self.w1], [0.0] * len(self.b1),
+                       [[0.0] * len(row) for row in self.w2], [0.0] * len(self.b2))
+
+
+@dataclass(frozen=True)
+class AdaptiveOptions:
+    """The NN-adaptive law's settings, as resolved by ddtrack (SPEC 3.6, 3.7)."""
+
+    gains: tuple[float, float, float]  # initial (Kx, Ky, Ktheta), also the leakage target
+    kc: tuple[float, float]  # K_c of eq. 11 [1/s]
+    max_velocity: float  # |v_c| clamp [m/s]
+    max_yaw_rate: float  # |omega_c| clamp [rad/s]
+    control_period: float  # T_c [s]
+    rates: tuple[float, float, float]  # Lambda [1/s], for the normalised Jacobian
+    gain_momentum: float  # beta_K
+    max_step: tuple[float, float, float]  # clip of the gain change per period
+    gain_min: tuple[float, float, float]
+    gain_max: tuple[float, float, float]
+    gate_error: float  # gains adapt only while e_tr is below this [m]
+    leakage: float  # sigma [1/s]
+    gamma: tuple[float, float, float]  # Gamma of eq. 22
+    learning_rate: float  # emulator eta
+    momentum: float  # emulator beta
+    clip_norm: float  # emulator gradient-norm clip
+    freeze_time: float  # no gain change before [s]
+    input_scales: tuple[float, float, float, float]  # s_z
+    output_scales: tuple[float, float, float]  # s_y
+    jacobian_scale: float  # c_bar (= c_v of SPEC 3.4 (a)), normalises the emulator's Jacobian
+
+
+@dataclass
+class AdaptiveMemory:
+    """What the NN-adaptive law carries from one control period to the next (updated in place)."""
+
+    gains: list[float]  # current (Kx, Ky, Ktheta)
+    network: Network  # emulator weights
+    velocity: Network  # their momentum
+    last_step: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # previous gain change
+    previous_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # measured q_{k-1}
+    previous_input: list[float] = field(default_factory=list)  # z_{k-1} = [v_c, omega_c, v, omega]
+    previous_saturated: bool = False  # a clamp or the torque limit acted at k-1
+    started: bool = False  # a transition exists to learn from
+
+
+def body_increment(pose: tuple, next_pose: tuple) -> tuple[float, float, float]:
+    """The emulator's target: the step q_k -> q_k+1 in the body frame of q_k, heading wrapped (SPEC 3.7, E1).
+    It is the posture error of ``next_pose`` seen from ``pose``."""
+    return posture_error(pose[0], pose[1], pose[2], next_pose[0], next_pose[1], next_pose[2])
+
+
+def hidden_layer(network: Network, z_normalised: list[float]) -> list[float]:
+    """h = tanh(W1 z~ + b1) (paper eq. 19, N_h tanh units)."""
+    return [math.tanh(sum(w * z for w, z in zip(row, z_normalised)) + b) for row, b in zip(network.w1, network.b1)]
+
+
+def output_layer(network: Network, h: list[float]) -> list[float]:
+    """y~ = W2 h + b2 (paper eq. 20 with the linear output of eq. 32)."""
+    return [sum(w * h_l for w, h_l in zip(row, h)) + b for row, b in zip(network.w2, network.b2)]
+
+
+def train_step(network: Network, velocity: Network, z_normalised: list[float], target: list[float],
+               options: AdaptiveOptions) -> None:
+    """One backpropagation step on E = |y~ - y~*|^2 / 2, in place (SPEC 3.7): delta_2 = y~ - y~*,
+    delta_1 = (W2^T delta_2) (1 - h^2), grad W2 = delta_2 h^T, grad W1 = delta_1 z~^T; the whole gradient
+    scaled down to norm <= clip_norm; dW(k) = -eta grad + beta dW(k-1), W <- W + dW, for every array."""
+    h = hidden_layer(network, z_normalised)
+    delta2 = [y - y_star for y, y_star in zip(output_layer(network, h), target)]
+    delta1 = [sum(network.w2[i][l] * d for i, d in enumerate(delta2)) * (1.0 - h_l * h_l) for l, h_l in enumerate(h)]
+    squares = (sum((d * z) ** 2 for d in delta1 for z in z_normalised) + sum(d * d for d in delta1)
+               + sum((d * h_l) ** 2 for d in delta2 for h_l in h) + sum(d * d for d in delta2))
+    rate = -options.learning_rate * min(1.0, options.clip_norm / max(math.sqrt(squares), 1e-300))
+    beta = options.momentum
+
+    def update(weights: list[float], momenta: list[float], delta: float, inputs: list[float]) -> None:
+        for j, x in enumerate(inputs):  # one row of a weight matrix: gradient delta * inputs
+            momenta[j] = rate * (delta * x) + beta * momenta[j]
+            weights[j] += momenta[j]
+
+    for l, d in enumerate(delta1):
+        update(network.w1[l], velocity.w1[l], d, z_normalised)
+    update(network.b1, velocity.b1, 1.0, delta1)
+    for i, d in enumerate(delta2):
+        update(network.w2[i], velocity.w2[i], d, h)
+    update(network.b2, velocity.b2, 1.0, delta2)
+
+
+def emulator_jacobian(network: Network, options: AdaptiveOptions, z: list[float]) -> list[list[float]]:
+    """J_b^n (3 x 2): the emulator's d y / d(v_c, omega_c) at z over c_bar (SPEC 3.4 (c)), with
+    d y_i / d z_j = s_y,i sum_l W2_il (1 - h_l^2) W1_lj / s_z,j (paper eq. 34 corrected, SPEC 3.7)."""
+    h = hidden_layer(network, [z_j / s for z_j, s in zip(z, options.input_scales)])
+    slope = [1.0 - h_l * h_l for h_l in h]
+    return [[s_y * sum(w2_l * slope_l * w1_l[j] for w2_l, slope_l, w1_l in zip(row, slope, network.w1))
+             / options.input_scales[j] / options.jacobian_scale for j in (0, 1)]
+            for row, s_y in zip(network.w2, options.output_scales)]
+
+
+def gain_gradient(error: tuple[float, float, float], v_r: float, gamma: tuple[float, float, float],
+                  jacobian: list[list[float]]) -> tuple[float, float, float]:
+    """dJ/d(Kx, Ky, Ktheta) = e^T Gamma D_b J_b^n Phi for J = e^T Gamma e / 2 (eqs. 22-24 corrected, SPEC 3.5
+    generic form), with the exact D_b = [[-1, 0, e_y], [0, -1, -e_x], [0, 0, -1]] (SPEC 3.3) and
+    Phi = [[e_x, 0, 0], [0, v_r e_y, v_r sin e_th]] (SPEC 3.2)."""
+    e_x, e_y, e_th = error
+    g_x, g_y, g_th = gamma[0] * e_x, gamma[1] * e_y, gamma[2] * e_th
+    row = (-g_x, -g_y, g_x * e_y - g_y * e_x - g_th)  # e^T Gamma D_b
+    along_v = sum(r * j[0] for r, j in zip(row, jacobian))  # ... J_b^n, the v_c column
+    along_omega = sum(r * j[1] for r, j in zip(row, jacobian))  # and the omega_c column
+    return along_v * e_x, along_omega * (v_r * e_y), along_omega * (v_r * math.sin(e_th))
+
+
+def nn_adaptive_step(nominal: Robot, options: AdaptiveOptions) -> Callable:
+    """NN-adaptive backstepping over computed torque (SPEC 3.8), as a ``step(t, y, ref, memory) -> (tau, memory)``
+    with an :class:`AdaptiveMemory`."""
+    limits = (options.max_velocity, options.max_yaw_rate)
+    tc = options.control_period
+
+    def step(t: float, y: State, ref: tuple, memory: AdaptiveMemory) -> tuple[tuple[float, float], AdaptiveMemory]:
+        error = posture_error(y[0], y[1], y[2], ref[0], ref[1], ref[2])
+        v, omega = y[3], y[4]
+        # a saturated transition says nothing about the command's effect (the actuators ignored it):
+        # neither learn from it nor adapt the gains after it
+        usable = memory.started and not memory.previous_saturated
+        if usable:  # learn the last transition (SPEC 3.7, online)
+            z_normalised = [z / s for z, s in zip(memory.previous_input, options.input_scales)]
+            target = [d / s for d, s in zip(body_increment(memory.previous_pose, y), options.output_scales)]
+            train_step(memory.network, memory.velocity, z_normalised, target, options)
+
+        gains = memory.gains
+        if usable and math.hypot(error[0], error[1]) < options.gate_error and t >= options.freeze_time:  # SPEC 3.6
+            v_c, omega_c = kanayama(error, v, omega, ref, *gains)[:2]  # the current gains' command, clamped
+            jacobian = emulator_jacobian(memory.network, options, [clamp(v_c, limits[0]), clamp(omega_c, limits[1]),
+                                                                   v, omega])
+            gradient = gain_gradient(error, ref[3], options.gamma, jacobian)
+            for i in range(3):  # eq. 26 made implementable: momentum, leakage, clip, box (SPEC 3.6)
+                change = (-tc * options.rates[i] * gradient[i] + options.gain_momentum * memory.last_step[i]
+                          - tc * options.leakage * (gains[i] - options.gains[i]))
+                memory.last_step[i] = clamp(change, options.max_step[i])
+                gains[i] = min(max(gains[i] + memory.last_step[i], options.gain_min[i]), options.gain_max[i])
+        else:
+            memory.last_step = [0.0, 0.0, 0.0]  # a closed gate also stops the gain momentum
+
+        v_c, omega_c, v_c_dot, omega_c_dot, saturated = clamp_command(
+            *kanayama(error, v, omega, ref, *gains), *limits)
+        tau_r, tau_l = unsaturated_torque(nominal, v, omega, v_c, omega_c, v_c_dot, omega_c_dot, options.kc)
+        memory.previous_saturated = saturated or abs(tau_r) > nominal.max_torque or abs(tau_l) > nominal.max_torque
+        memory.previous_pose, memory.previous_input, memory.started = (y[0], y[1], y[2]), [v_c, omega_c, v, omega], True
+        return (clamp(tau_r, nominal.max_torque), clamp(tau_l, nominal.max_torque)), memory
 
     return step
 
@@ -227,6 +417,16 @@ def run_backstepping(*, plant: Robot, nominal: Robot, disturbance: Disturbance, 
                     n_steps=n_steps, control_period=control_period, substeps=substeps)
 
 
+def run_nn_adaptive(*, plant: Robot, nominal: Robot, disturbance: Disturbance, line: Line, x0: State,
+                    adaptive: AdaptiveOptions, network: Network, n_steps: int, control_period: float,
+                    substeps: int) -> list[State]:
+    """One NN-adaptive run; the keyword arguments are what :func:`params_from_nn_setup` returns.
+    ``network`` holds the emulator's initial weights; it is copied, so every run starts from them."""
+    memory = AdaptiveMemory(gains=list(adaptive.gains), network=network.copy(), velocity=network.zeros())
+    return simulate(nn_adaptive_step(nominal, adaptive), memory, plant, disturbance, line, x0,
+                    n_steps=n_steps, control_period=control_period, substeps=substeps)
+
+
 # --- reading a ddtrack scenario ------------------------------------------------------------------
 
 
@@ -234,16 +434,58 @@ def _robot(params: Any) -> Robot:
     return Robot(**{name: float(getattr(params, name)) for name in Robot.__dataclass_fields__})
 
 
+# the NN-adaptive options this loop implements: the defaults of ddtrack's NNAdaptiveConfig
+NN_CHOICES = {"jacobian": "network", "error_jacobian": "exact", "emulator": "E1", "online_learning": True,
+              "learn_saturated": False, "structured_jacobian": False}
+
+
 def params_from_scenario(scenario: Any) -> dict[str, Any]:
     """The keyword arguments of :func:`run_backstepping` from a loaded ``ddtrack.Scenario``.
 
     Refuses, loudly, what this loop does not implement (so a comparison is never silently unfair).
     """
-    unsupported = []
+    params = _loop_params(scenario, "backstepping", [])
+    control = scenario.controller
+    kx, ky, ktheta = control.gains
+    params["gains"] = BacksteppingGains(kx=kx, ky=ky, ktheta=ktheta, kc=tuple(control.kc),
+                                        max_velocity=control.max_velocity, max_yaw_rate=control.max_yaw_rate)
+    return params
+
+
+def params_from_nn_setup(scenario: Any, setup: Any) -> dict[str, Any]:
+    """The keyword arguments of :func:`run_nn_adaptive` from a loaded NN-adaptive ``ddtrack.Scenario`` and
+    its ``ddtrack.prepare(scenario)[0]``: the emulator's weights (drawn from the seed, or identified), its
+    scales and c_bar are taken from the setup's controller as lists of floats; everything per step is then
+    this module's. Refuses, loudly, the options this loop does not implement.
+    """
+    control = scenario.controller
+    unsupported = [f"controller.{name} = {getattr(control, name)!r}" for name, value in NN_CHOICES.items()
+                   if getattr(control, name, value) != value]
+    params = _loop_params(scenario, "nn_adaptive_backstepping", unsupported)
+    law = setup.controller.outer
+    floats = lambda values: tuple(float(x) for x in values)  # noqa: E731
+    mlp = law.emulator.mlp
+    params["network"] = Network(w1=mlp.w1.tolist(), b1=mlp.b1.tolist(), w2=mlp.w2.tolist(), b2=mlp.b2.tolist())
+    params["adaptive"] = AdaptiveOptions(
+        gains=floats(law.gains), kc=floats(control.kc), max_velocity=float(law.max_velocity),
+        max_yaw_rate=float(law.max_yaw_rate), control_period=float(law.control_period), rates=floats(law.rates),
+        gain_momentum=float(law.gain_momentum), max_step=floats(law.max_step), gain_min=floats(law.gain_min),
+        gain_max=floats(law.gain_max), gate_error=float(law.gate_error), leakage=float(law.leakage),
+        gamma=floats(law.gamma), learning_rate=float(law.learning_rate), momentum=float(law.momentum),
+        clip_norm=float(law.clip_norm), freeze_time=float(law.freeze_time),
+        input_scales=floats(law.emulator.scales.inputs), output_scales=floats(law.emulator.scales.outputs),
+        jacobian_scale=float(law.analytic_coefficients[0]))
+    return params
+
+
+def _loop_params(scenario: Any, controller: str, unsupported: list[str]) -> dict[str, Any]:
+    """The plant, nominal model, disturbance, line, initial state and time grid of a run of ``controller``
+    (a ``controller.kind``); raises on anything this module does not implement, ``unsupported`` included."""
+    unsupported = list(unsupported)
     if scenario.trajectory.kind != "line":
         unsupported.append(f"trajectory.kind = {scenario.trajectory.kind!r} (only 'line')")
-    if scenario.controller.kind != "backstepping" or scenario.controller.inner != "computed_torque":
-        unsupported.append("a controller other than backstepping over computed_torque")
+    if scenario.controller.kind != controller or scenario.controller.inner != "computed_torque":
+        unsupported.append(f"a controller other than {controller} over computed_torque")
     if scenario.controller.strict:
         unsupported.append("controller.strict = true")
     if scenario.disturbance.kind not in ("none", "constant", "sinusoid"):
@@ -259,8 +501,6 @@ def params_from_scenario(scenario: Any) -> dict[str, Any]:
     disturbance = Disturbance(bias=tuple(map(float, wheel.bias)), amplitude=tuple(map(float, wheel.amplitude)),
                               frequency=float(wheel.frequency), phase=tuple(map(float, wheel.phase)))
     trajectory = scenario.trajectory
-    control = scenario.controller
-    kx, ky, ktheta = control.gains
     pose = scenario.initial.pose
     if pose is None:  # start on the reference
         ref0 = line_reference(Line(tuple(trajectory.start), trajectory.heading, trajectory.speed), 0.0)
@@ -272,8 +512,6 @@ def params_from_scenario(scenario: Any) -> dict[str, Any]:
         disturbance=disturbance,
         line=Line(start=tuple(trajectory.start), heading=float(trajectory.heading), speed=float(trajectory.speed)),
         x0=(*map(float, pose), *map(float, scenario.initial.velocity)),
-        gains=BacksteppingGains(kx=kx, ky=ky, ktheta=ktheta, kc=tuple(control.kc), max_velocity=control.max_velocity,
-                                max_yaw_rate=control.max_yaw_rate),
         n_steps=sim.n_steps,
         control_period=sim.control_period,
         substeps=sim.substeps,

@@ -1,6 +1,7 @@
 """Speed benchmark: ddtrack against a plain Python loop on the paper's line case (docs/benchmarks.md).
 
-    python bench/speed.py [--json] [--repeats N] [--python-repeats M] [--cli-repeats K] [--batch B]
+    python bench/speed.py [--json] [--repeats N] [--python-repeats M] [--python-nn-repeats P] [--cli-repeats K]
+                          [--control-repeats C] [--batch-sizes 256,1024]
 
 In one process, in this order:
 
@@ -8,14 +9,23 @@ In one process, in this order:
    minus the median steady-state run. JAX's persistent cache is off in this process, so it is a
    real compile; the JAX backend is started before, so its start-up is not counted.
 2. The check: the plain Python loop (bench/python_loop.py) and ddtrack must give the same states
-   (max |difference| over every recorded state <= 1e-8), or the script stops with exit code 1.
+   (max |difference| over every recorded state <= 1e-8), or the script stops with exit code 1; the
+   same for the NN-adaptive controller without identification (the emulator starts from the weights
+   ddtrack draws from the seed, which the Python loop takes from ``ddtrack.prepare``).
 3. ``single_bs_s``: median wall time of ``ddtrack.run(scenario)`` (randomness drawn from the seed,
    then the jitted ``lax.scan``), waited for with ``jax.block_until_ready``; ``simulate_only_s``
    is ``ddtrack.simulate`` alone on the prepared arguments.
 4. ``python_loop_bs_s``: median wall time of the same run by the Python loop;
    ``ratio_python_over_ddtrack`` = python_loop_bs_s / single_bs_s (the target is >= 10).
-5. ``batch_s``: optional, ``jax.vmap`` of ``ddtrack.simulate`` over B initial poses (--batch 0 skips).
-6. ``cold_cli_s`` / ``warm_cli_s``: wall time of a whole ``ddtrack run scenarios/paper_line.toml
+5. ``single_nn_s``: median wall time of one NN-adaptive run (identification apart, timed as
+   ``nn_identification_s``); ``python_loop_nn_s``: the plain Python NN loop on the same scenario without
+   identification (the same per-period work); ``ratio_python_nn_over_ddtrack`` = python_loop_nn_s / single_nn_s.
+6. ``control_bs_s``: python-control's ``input_output_response`` on the same closed loop at matching
+   accuracy (bench/control_loop.py; needs ``pip install -e '.[bench]'``); ``ratio_control_over_ddtrack``.
+7. ``batch_bs_robot_steps_per_s`` / ``batch_nn_robot_steps_per_s``: robot control steps per second of
+   ``runner.batch_metrics`` (the path of ``ddtrack mc``) at the best of the tried batch sizes (bench/batch.py),
+   on one JAX CPU device per core, as the ``ddtrack`` command sets up.
+8. ``cold_cli_s`` / ``warm_cli_s``: wall time of a whole ``ddtrack run scenarios/paper_line.toml
    --out <tmp>`` subprocess (interpreter start, imports, compile, run, metrics, writing the run
    folder) with DDTRACK_CACHE_DIR pointing at a fresh empty folder (cold), then at that folder once
    populated (warm). Each cold repeat gets its own fresh folder.
@@ -108,14 +118,19 @@ def check_agreement(ddtrack_states, python_states) -> float:
     return difference
 
 
-def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, object]:
+def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, control_repeats: int,
+                    batch_sizes: list[int]) -> dict[str, object]:
     start = time.perf_counter()
     import jax
     import jax.numpy as jnp
+    import numpy as np
+
+    jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)))  # as the ddtrack command: batches use every core
 
     import ddtrack
     from ddtrack.model import DynamicPlant
-    from python_loop import params_from_scenario, run_backstepping
+    from ddtrack.runner import run_setup
+    from python_loop import params_from_nn_setup, params_from_scenario, run_backstepping, run_nn_adaptive
 
     import_s = time.perf_counter() - start
     jax.config.update("jax_enable_compilation_cache", False)  # a real compile, whatever the environment says
@@ -132,6 +147,13 @@ def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, 
 
     params = params_from_scenario(scenario)
     difference = check_agreement(result.state, run_backstepping(**params))
+    # the NN loop starts from ddtrack's initial emulator weights: no identification to redo by hand
+    nn_free = ddtrack.load_scenario(SCENARIO, controller="nn_adaptive_backstepping",
+                                    overrides=["controller.identification=false"])
+    nn_free_setup, nn_free_draws = ddtrack.prepare(nn_free)
+    nn_params = params_from_nn_setup(nn_free, nn_free_setup)
+    nn_difference = check_agreement(run_setup(nn_free, nn_free_setup, nn_free_draws).state,
+                                    run_nn_adaptive(**nn_params))
 
     single = timings(run_ddtrack, repeats)
 
@@ -152,19 +174,19 @@ def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, 
 
     # NN-adaptive: the control loop of one run (emulator training and gain law every period); its
     # identification phase is a separate one-off cost, timed apart (compile excluded in both)
-    from ddtrack.runner import run_setup
-
     nn_scenario = ddtrack.load_scenario(SCENARIO, controller="nn_adaptive_backstepping")
     nn_setup, nn_draws = ddtrack.prepare(nn_scenario)
     nn_identify = timings(lambda: jax.block_until_ready(ddtrack.prepare(nn_scenario)[0].identification), 2)
     jax.block_until_ready(run_setup(nn_scenario, nn_setup, nn_draws))
     single_nn = timings(lambda: jax.block_until_ready(run_setup(nn_scenario, nn_setup, nn_draws)), repeats)
+    python_nn = timings(lambda: run_nn_adaptive(**nn_params), python_nn_repeats)
 
     figures: dict[str, object] = {
         "scenario": str(SCENARIO.relative_to(ROOT)),
         "n_steps": sim.n_steps,
         "substeps": sim.substeps,
         "max_abs_state_difference": difference,
+        "max_abs_state_difference_nn": nn_difference,
         "import_s": import_s,
         "first_call_s": first_s,
         "compile_s": first_s - statistics.median(single),
@@ -179,29 +201,29 @@ def measure_library(repeats: int, python_repeats: int, batch: int) -> dict[str, 
         "python_loop_bs_min_s": min(python),
         "ratio_python_over_ddtrack": statistics.median(python) / statistics.median(single),
         "ratio_python_over_ddtrack_min": min(python) / min(single),
+        "python_loop_nn_s": statistics.median(python_nn),
+        "python_loop_nn_min_s": min(python_nn),
+        "ratio_python_nn_over_ddtrack": statistics.median(python_nn) / statistics.median(single_nn),
+        "ratio_python_nn_over_ddtrack_min": min(python_nn) / min(single_nn),
         "repeats": repeats,
         "python_repeats": python_repeats,
+        "python_nn_repeats": python_nn_repeats,
     }
-    if batch > 0:
-        figures.update(measure_batch(jax, jnp, ddtrack, plant, setup, draws, options, x0, batch, max(3, repeats // 4)))
+    if control_repeats:
+        from control_loop import time_control
+
+        figures.update(time_control(control_repeats, ddtrack_result=np.asarray(result.state)))
+        figures["ratio_control_over_ddtrack"] = figures["control_bs_s"] / figures["single_bs_s"]
+        figures["ratio_control_over_ddtrack_min"] = figures["control_bs_min_s"] / figures["single_bs_min_s"]
+    if batch_sizes:
+        from batch import best_throughput
+
+        throughput = best_throughput(batch_sizes, repeats=2)
+        for kind, key in (("backstepping", "batch_bs"), ("nn_adaptive_backstepping", "batch_nn")):
+            best = throughput["best"][kind]
+            figures |= {f"{key}_robot_steps_per_s": best["robot_steps_per_s"], f"{key}_best_size": best["batch"]}
+        figures["batch_devices"] = len(jax.devices())
     return figures
-
-
-def measure_batch(jax, jnp, ddtrack, plant, setup, draws, options, x0, size, repeats) -> dict[str, object]:
-    """``size`` robots starting 0..5 m further from the line, in one ``vmap`` over the initial state."""
-    starts = x0 + jnp.linspace(0.0, 5.0, size)[:, None] * jnp.array([0.0, 1.0, 0.0, 0.0, 0.0])
-    batched = jax.jit(jax.vmap(lambda z: ddtrack.simulate(plant, setup.controller, setup.trajectory, z, draws,
-                                                          **options)))
-
-    def run_batch():
-        return jax.block_until_ready(batched(starts))
-
-    start = time.perf_counter()
-    run_batch()
-    first_s = time.perf_counter() - start
-    times = timings(run_batch, repeats)
-    return {"batch_size": size, "batch_compile_s": first_s - statistics.median(times),
-            "batch_s": statistics.median(times), "batch_per_robot_s": statistics.median(times) / size}
 
 
 def ddtrack_command() -> list[str]:
@@ -250,8 +272,12 @@ ROWS = [
     ("nn_identification_s", "NN identification phase"),
     ("python_loop_bs_s", "plain Python loop, same run"),
     ("ratio_python_over_ddtrack", "speed-up python / ddtrack (target >= 10)"),
-    ("batch_s", "vmap batch"),
-    ("batch_per_robot_s", "  per robot"),
+    ("python_loop_nn_s", "plain Python NN loop (no identification)"),
+    ("ratio_python_nn_over_ddtrack", "speed-up python NN / ddtrack NN"),
+    ("control_bs_s", "python-control input_output_response"),
+    ("ratio_control_over_ddtrack", "speed-up python-control / ddtrack (>= 10)"),
+    ("batch_bs_robot_steps_per_s", "batch backstepping (target 5 M)"),
+    ("batch_nn_robot_steps_per_s", "batch NN-adaptive (target 1 M)"),
     ("cold_cli_s", "`ddtrack run`, empty compile cache"),
     ("warm_cli_s", "`ddtrack run`, populated cache"),
 ]
@@ -262,13 +288,16 @@ def table(result: dict[str, object]) -> str:
              f"{result['substeps']} RK4 substeps",
              f"{result['cpu']} ({result['cores']} cores), python {result['python']}, jax {result['jax']}, "
              f"numpy {result['numpy']}, {result['date']}",
-             f"states agree to {result['max_abs_state_difference']:.1e}", ""]
+             f"states agree to {result['max_abs_state_difference']:.1e} (backstepping), "
+             f"{result['max_abs_state_difference_nn']:.1e} (NN-adaptive)", ""]
     for key, label in ROWS:
         if key not in result:
             continue
         value = result[key]
-        if key == "batch_s":
-            label = f"vmap batch of {result['batch_size']} robots, all of it"
+        if key.startswith("batch_"):
+            size = result[key.replace("robot_steps_per_s", "best_size")]
+            lines.append(f"  {label:<44} {value / 1e6:10.2f} M robot control steps/s (batch {size})")
+            continue
         if key.startswith("ratio"):
             lines.append(f"  {label:<44} {value:10.1f} x   (min/min {result[key + '_min']:.1f} x)")
             continue
@@ -284,16 +313,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=20, help="timed ddtrack runs (median reported)")
     parser.add_argument("--python-repeats", type=int, default=None,
                         help="timed Python-loop runs [default: min(repeats, 5)]")
+    parser.add_argument("--python-nn-repeats", type=int, default=3,
+                        help="timed Python NN-loop runs, under a second each [default 3]")
     parser.add_argument("--cli-repeats", type=int, default=3, help="cold and warm CLI runs each [default 3]")
-    parser.add_argument("--batch", type=int, default=100, help="robots in the vmap batch; 0 skips it")
+    parser.add_argument("--control-repeats", type=int, default=3,
+                        help="timed python-control runs (pip install -e '.[bench]'), about 1.2 s each; 0 skips them")
+    parser.add_argument("--batch-sizes", default="256,1024",
+                        help="batch sizes tried for the batch throughput (comma-separated); '' skips it")
     args = parser.parse_args(argv)
-    if args.repeats < 1 or args.cli_repeats < 0 or args.batch < 0:
-        parser.error("--repeats must be >= 1, --cli-repeats and --batch >= 0")
+    if args.repeats < 1 or args.cli_repeats < 0 or args.control_repeats < 0:
+        parser.error("--repeats must be >= 1, --cli-repeats and --control-repeats >= 0")
+    batch_sizes = [int(size) for size in args.batch_sizes.split(",") if size.strip()]
     python_repeats = args.python_repeats if args.python_repeats is not None else min(args.repeats, 5)
 
     load_start = load_average()
     try:
-        figures = measure_library(args.repeats, max(1, python_repeats), args.batch)  # imports jax: first
+        figures = measure_library(args.repeats, max(1, python_repeats), max(1, args.python_nn_repeats),
+                                  args.control_repeats, batch_sizes)  # imports jax: first
         if args.cli_repeats:
             figures.update(measure_cli(args.cli_repeats))
     except Disagreement as exc:

@@ -47,6 +47,29 @@ def test_common_random_numbers_across_controllers():
     assert np.array_equal(draws_bs.noise, draws_nn.noise)
 
 
+@pytest.mark.parametrize("kind", ["backstepping", "nn_adaptive_backstepping"])
+def test_monte_carlo_metrics_equal_the_single_runs(kind):
+    """mc keeps only the series the metrics read; its rows must equal the metrics of full single runs,
+    a diverged run included (a divergence bound of 5 cm: seed 1's error peaks above it, 0 and 2 stay below)."""
+    extra = ["controller.epochs=2", "controller.identification_duration=5"] if kind != "backstepping" else []
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, *extra,
+                                     "simulation.divergence_error=0.05"], controller=kind)
+    rows = monte_carlo(scenario, [0, 1, 2], chunk_size=3)
+    sim = scenario.simulation
+    statuses = []
+    for seed, mc_row in zip([0, 1, 2], rows, strict=True):
+        single = ddtrack.run(scenario, seed=seed)
+        expected = ddtrack.summarize(ddtrack.timeseries(single), status=single.status_name, window=sim.window,
+                                     control_period=sim.control_period, settling_threshold=sim.settling_threshold,
+                                     failure_time=single.failure_time)
+        assert set(expected) <= set(mc_row)
+        for name, value in expected.items():
+            close = pytest.approx(value, rel=1e-10, abs=1e-12) if isinstance(value, (float, list)) else value
+            assert mc_row[name] == close, name
+        statuses.append(mc_row["status"])
+    assert statuses == ["ok", "diverged", "ok"]
+
+
 def test_chunking_does_not_change_the_runs():
     scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM)
     whole = monte_carlo(scenario, list(range(5)), chunk_size=5)
@@ -123,3 +146,24 @@ def test_mc_shows_a_progress_bar_on_a_terminal(tmp_path):
     text = screen.decode(errors="replace")
     assert "0/4" in text and "4/4" in text and "backstepping" in text and "━" in text
     assert "4/4" not in stdout and "runs per controller" in stdout  # the bar stays off the results
+
+
+def test_runs_split_over_two_cpu_devices_are_the_same_runs():
+    """``shard_runs`` spreads a chunk over JAX's CPU devices (``ddtrack`` asks for one per core): a subprocess
+    with two devices must give the rows this one-device process gives."""
+    script = (
+        "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
+        "import ddtrack\nfrom ddtrack.runner import monte_carlo, shard_runs\n"
+        "assert len(jax.devices()) == 2 and len(shard_runs(jax.numpy.zeros(4)).sharding.device_set) == 2\n"
+        f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
+        "print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    sharded = json.loads(done.stdout)
+    here = monte_carlo(ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM), [0, 1, 2, 3],
+                       chunk_size=4)
+    for a, b in zip(here, sharded, strict=True):
+        assert a["seed"] == b["seed"] and a["plant_mass"] == b["plant_mass"]
+        assert a["e_tr_mean"] == pytest.approx(b["e_tr_mean"], abs=1e-12)
+        assert a["effort"] == pytest.approx(b["effort"], rel=1e-12)

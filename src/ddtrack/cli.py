@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import click
+import jax
 
 from .errors import ConfigError, RunError
 from .runner import enable_compilation_cache
@@ -263,5 +264,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def entry_point() -> None:
-    """Console-script entry point."""
+    """Console-script entry point. The ``ddtrack`` process gives JAX one CPU device per core, so that ``mc``
+    batches split over the cores (``runner.shard_runs``); in-process callers of :func:`main` keep their own."""
+    jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                      else os.cpu_count() or 1)
     sys.exit(main())
