@@ -21,7 +21,6 @@ import jax
 import jax.numpy as jnp
 
 import ddtrack
-from ddtrack.model import DynamicPlant
 from ddtrack.runner import batch_metrics, prepare_batch, run_setup
 from ddtrack.sim import rk4
 
@@ -63,7 +62,7 @@ def profile(size: int) -> dict:
     plants = jax.jit(jax.vmap(plant_only))
     figures = {
         "batch": size,
-        "plant_only_ns": per_step * best_time(lambda: plants(DynamicPlant(setup.plant_params), setup.x0)),
+        "plant_only_ns": per_step * best_time(lambda: plants(setup.plant, setup.x0)),
         "full_step_ns": per_step * best_time(lambda: run_setup(scenario, setup, draws, batched=True)),
         "metrics_step_ns": per_step * best_time(lambda: batch_metrics(scenario, setup, draws) and 0),
     }

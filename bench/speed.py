@@ -128,7 +128,6 @@ def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, c
     jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)))  # as the ddtrack command: batches use every core
 
     import ddtrack
-    from ddtrack.model import DynamicPlant
     from ddtrack.runner import run_setup
     from python_loop import params_from_nn_setup, params_from_scenario, run_backstepping, run_nn_adaptive
 
@@ -159,7 +158,7 @@ def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, c
 
     setup, draws = ddtrack.prepare(scenario)
     sim = scenario.simulation
-    plant = DynamicPlant(setup.plant_params)
+    plant = setup.plant
     options = dict(n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
                    disturbance=setup.disturbance, noise=setup.noise, divergence_error=sim.divergence_error)
     x0 = jnp.asarray(setup.x0)

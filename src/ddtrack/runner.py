@@ -19,7 +19,7 @@ from jax import Array
 
 from .identification import Identification, identify
 from .metrics import summarize
-from .model import DynamicPlant, RobotParams
+from .model import RobotParams
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import STATUS_NAMES, Draws, SimResult, simulate, simulate_batch, stack
 
@@ -169,7 +169,7 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
-    plant = DynamicPlant(setup.plant_params)
+    plant = setup.plant  # the true robot, or the unicycle for a kinematic controller
     if batched:
         return simulate_batch(plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance,
                               setup.noise, **_steps(scenario))
@@ -199,7 +199,7 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
     sim = scenario.simulation
-    runs = shard_runs((DynamicPlant(setup.plant_params), setup.controller, setup.trajectory, setup.x0, draws,
+    runs = shard_runs((setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
                        setup.disturbance, setup.noise))
     series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **_steps(scenario)))
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it

@@ -32,8 +32,17 @@ from .controllers import (
     init_mlp,
     one_step_coefficient,
 )
+from .controllers.baselines import (
+    AdaptiveComputedTorque,
+    LTVUnicycleLQR,
+    MPPI,
+    MPPICost,
+    RegulatedPurePursuit,
+    SlidingModeTorque,
+)
 from .errors import ConfigError, did_you_mean
-from .model import MeasurementNoise, RobotParams, WheelDisturbance
+from .model import DynamicPlant, KinematicPlant, MeasurementNoise, RobotParams, WheelDisturbance
+from .sim import NominalPeriod
 from .trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square
 
 Positive = Annotated[float, Field(gt=0.0)]
@@ -446,8 +455,9 @@ class NNAdaptiveConfig(BacksteppingConfig):
     leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
     gamma: tuple[NonNegative, NonNegative, NonNegative] = Field((1.0, 50.0, 1.0), description=(
         "Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta)."))
-    jacobian: Literal["network", "analytic", "quasi_static"] = Field("network", description=(
-        "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, or quasi-static."))
+    jacobian: Literal["network", "analytic", "quasi_static", "model", "model_sensitivity"] = Field(
+        "network", description=("Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
+                                "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."))
     error_jacobian: Literal["exact", "paper"] = Field("exact", description=(
         "d e_p / d q: exact (SPEC 3.3) or the paper's approximation -T_e."))
     emulator: Literal["E1", "E0"] = Field("E1", description=(
@@ -475,6 +485,13 @@ class NNAdaptiveConfig(BacksteppingConfig):
                 raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
         return self
 
+    def _nominal_period(self, nominal: RobotParams, control_period: float) -> NominalPeriod | None:
+        """One period of the nominal model under the inner loop, RK4 steps of at most 1 ms (the "model" Jacobians)."""
+        if not self.jacobian.startswith("model"):
+            return None
+        return NominalPeriod(DynamicPlant(nominal), self.build_inner(nominal, control_period), control_period,
+                             substeps=max(1, math.ceil(control_period / 1e-3 - 1e-9)))
+
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller with a freshly initialised emulator (its identification is done by the runner)."""
         uses_velocity = self.emulator == "E1"
@@ -490,11 +507,217 @@ class NNAdaptiveConfig(BacksteppingConfig):
             momentum=self.momentum, clip_norm=self.gradient_clip, freeze_time=freeze, max_velocity=self.max_velocity,
             max_yaw_rate=self.max_yaw_rate, jacobian=self.jacobian, error_jacobian=self.error_jacobian,
             online_learning=self.online_learning, learn_saturated=self.learn_saturated, structured_jacobian=self.structured_jacobian, strict=self.strict,
+            nominal_period=self._nominal_period(nominal, control_period),
         )
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
-ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig], Field(discriminator="kind")]
+class LTVLQRConfig(_Section):
+    """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
+
+    kind: Literal["ltv_lqr"]
+    q_tolerance: PositiveTriple = Field((0.0625, 0.125, 2.0), description=(
+        "Tolerated (e_x [m], e_y [m], e_theta [rad]); Q = diag(1/q^2) (Bryson's rule, WPILib's defaults)."))
+    r_tolerance: tuple[Positive, Positive] = Field((1.0, 2.0), description=(
+        "Tolerated velocity correction (v [m/s], omega [rad/s]); R = diag(1/r^2)."))
+    min_velocity: Positive = Field(1e-4, description=(
+        "|v_r| below this is linearised at this speed, where e_y stays controllable [m/s]."))
+    dare_iterations: int = Field(32, ge=1, le=64, description=(
+        "Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."))
+    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
+    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
+    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    @model_validator(mode="after")
+    def _min_velocity_below_clamp(self) -> LTVLQRConfig:
+        if self.min_velocity >= self.max_velocity:
+            raise FieldError("min_velocity", f"{self.min_velocity:g} m/s must be below max_velocity "
+                             f"({self.max_velocity:g} m/s); WPILib uses 1e-4")
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        outer = LTVUnicycleLQR(q_tolerance=self.q_tolerance, r_tolerance=self.r_tolerance,
+                               control_period=control_period, min_velocity=self.min_velocity,
+                               max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
+                               dare_iterations=self.dare_iterations)
+        # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
+        return Cascade(outer, BacksteppingConfig.build_inner(self, nominal, control_period))  # type: ignore[arg-type]
+
+
+class SlidingModeConfig(_Section):
+    """Kanayama backstepping over a sliding-mode inner loop with a boundary layer (Slotine and Li 7.1-7.2)."""
+
+    kind: Literal["sliding_mode_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11, the linear part [1/s].")
+    switching_gain: tuple[NonNegative, NonNegative] = Field((1.0, 2.0), description=(
+        "K_s (v [m/s^2], omega [rad/s^2]): must exceed the matched disturbance as an acceleration; 0 gives "
+        "computed torque."))
+    boundary_layer: tuple[Positive, Positive] = Field((0.02, 0.04), description=(
+        "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."))
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
+                             max_yaw_rate=self.max_yaw_rate)
+        return Cascade(outer, SlidingModeTorque(nominal, kc=self.kc, switching_gain=self.switching_gain,
+                                                boundary_layer=self.boundary_layer))
+
+
+class KinematicBacksteppingConfig(_Section):
+    """Kanayama's law on the unicycle with ideal velocity tracking: a reference point (paper eq. 12, SPEC 2.4)."""
+
+    kind: Literal["kinematic_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Backstepping:
+        """The velocity law alone, which drives the kinematic plant (:attr:`Setup.plant`); ``key`` is unused."""
+        kx, ky, ktheta = self.gains
+        return Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
+                            max_yaw_rate=self.max_yaw_rate)
+
+
+class RegulatedPurePursuitConfig(_Section):
+    """Regulated pure pursuit (Macenski et al. 2023, Nav2) keeping pace with the reference, over an inner loop."""
+
+    kind: Literal["regulated_pure_pursuit"]
+    lookahead_time: NonNegative = Field(1.5, description=(
+        "Lookahead L = |v| * lookahead_time, clipped to [min_lookahead, max_lookahead] [s]."))
+    min_lookahead: Positive = Field(0.3, description="Smallest lookahead distance [m].")
+    max_lookahead: Positive = Field(0.9, description="Largest lookahead distance [m]; equal to min_lookahead: fixed.")
+    pace_gain: NonNegative = Field(1.0, description=(
+        "k_s: desired speed v_r + k_s e_x, so the along-track error e_x decays at this rate [1/s]."))
+    min_radius: NonNegative = Field(0.9, description=(
+        "Arcs tighter than this radius slow the robot by radius / min_radius; 0 turns the regulation off [m]."))
+    min_regulated_speed: NonNegative = Field(0.25, description=(
+        "The curvature regulation never slows below this (nor above the desired speed) [m/s]."))
+    approach_distance: Positive = Field(0.6, description=(
+        "Slow down in proportion to the distance to where the reference comes to rest, within this [m]."))
+    min_approach_speed: NonNegative = Field(0.05, description="Floor of the approach slow-down [m/s].")
+    rotate_to_heading: bool = Field(True, description="Rotate in place while the carrot is far off the heading.")
+    rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(0.785, description=(
+        "Bearing of the carrot beyond which the robot rotates in place [rad]."))
+    rotate_yaw_rate: Positive = Field(1.8, description="Yaw rate of the rotation in place [rad/s].")
+    search_horizon: Positive = Field(5.0, description=(
+        "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."))
+    search_samples: int = Field(50, ge=2, le=1000, description="Segments of that search (linear between samples).")
+    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
+    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
+    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
+    max_velocity: Positive = Field(2.0, description="Clamp on v_c [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c|, by slowing down on the same arc [rad/s].")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RegulatedPurePursuitConfig:
+        if self.min_lookahead > self.max_lookahead:
+            raise FieldError("min_lookahead", f"{self.min_lookahead:g} m exceeds max_lookahead ({self.max_lookahead:g} m)")
+        if self.rotate_yaw_rate > self.max_yaw_rate:
+            raise FieldError("rotate_yaw_rate", f"{self.rotate_yaw_rate:g} rad/s exceeds max_yaw_rate "
+                             f"({self.max_yaw_rate:g} rad/s)")
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> Cascade:
+        """The controller searching ``trajectory`` for its carrot; ``key`` is unused (nothing is drawn)."""
+        outer = RegulatedPurePursuit(
+            trajectory=trajectory, lookahead_time=self.lookahead_time, min_lookahead=self.min_lookahead,
+            max_lookahead=self.max_lookahead, pace_gain=self.pace_gain, min_radius=self.min_radius,
+            min_regulated_speed=self.min_regulated_speed, approach_distance=self.approach_distance,
+            min_approach_speed=self.min_approach_speed, rotate_min_angle=self.rotate_min_angle,
+            rotate_yaw_rate=self.rotate_yaw_rate, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
+            search_horizon=self.search_horizon, search_samples=self.search_samples,
+            rotate_to_heading=self.rotate_to_heading)
+        # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
+        return Cascade(outer, BacksteppingConfig.build_inner(self, nominal, control_period))  # type: ignore[arg-type]
+
+
+class AdaptiveBacksteppingConfig(_Section):
+    """Kanayama backstepping over computed torque that estimates m, I_C (and b_w) online (Fukao et al. 2000)."""
+
+    kind: Literal["adaptive_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description=(
+        "K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."))
+    adaptation_gain: tuple[NonNegative, NonNegative, NonNegative] = Field((500.0, 5.0, 1e-4), description=(
+        "Gamma of the estimates of (m [kg s^2/m^2], I_C [kg m^2 s^2], viscous friction b_w [kg m^2]); "
+        "0 freezes that estimate at the [robot] value."))
+    estimate_range: tuple[Positive, Positive] = Field((0.5, 2.0), description=(
+        "Projection bounds of the m and I_C estimates, as multiples of the [robot] values."))
+    max_friction: NonNegative = Field(0.05, description=(
+        "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."))
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term to the torque law.")
+
+    @model_validator(mode="after")
+    def _range_holds_the_nominal(self) -> AdaptiveBacksteppingConfig:
+        low, high = self.estimate_range
+        if not low <= 1.0 <= high or low == high:
+            raise FieldError("estimate_range", f"{list(self.estimate_range)} must satisfy low <= 1 <= high, "
+                             "low < high (the estimates start at the [robot] values); e.g. [0.5, 2.0]")
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
+                             max_yaw_rate=self.max_yaw_rate, strict=self.strict)
+        low, high = self.estimate_range
+        inner = AdaptiveComputedTorque(
+            nominal, kc=self.kc, gamma=self.adaptation_gain, control_period=control_period,
+            lower=(low * nominal.mass, low * nominal.inertia, 0.0),
+            upper=(high * nominal.mass, high * nominal.inertia, max(self.max_friction, nominal.viscous_friction)))
+        return Cascade(outer, inner)
+
+
+class MPPIConfig(_Section):
+    """Model predictive path integral control of the wheel torques on the nominal model (Williams et al. 2017)."""
+
+    kind: Literal["mppi"]
+    samples: int = Field(64, ge=1, le=10_000, description="K: torque sequences sampled per control period.")
+    horizon: int = Field(20, ge=1, le=500, description="H: steps per sequence.")
+    model_step: Positive = Field(0.05, le=10.0, description=(
+        "dt: how long each step of a sequence holds its torque, and the rollout's Euler step [s]."))
+    temperature: Positive = Field(1.0, description=(
+        "lambda of the weights exp(-(S - min S) / lambda), in cost units: lower trusts the best samples more."))
+    noise_std: tuple[Positive, Positive] = Field((0.2, 0.2), description=(
+        "sigma of the sampled torque perturbations, [right, left] wheel [N m]."))
+    position_weight: NonNegative = Field(100.0, description="q_p of the squared position error, per step [1/m^2].")
+    heading_weight: NonNegative = Field(1.0, description="q_th of the squared heading error, per step [1/rad^2].")
+    velocity_weight: NonNegative = Field(1.0, description=(
+        "q_nu of |nu - nu_r|^2, per step [s^2/m^2 and s^2/rad^2]."))
+    effort_weight: NonNegative = Field(0.01, description="r of the squared wheel torques, per step [1/(N m)^2].")
+    terminal_weight: NonNegative = Field(10.0, description=(
+        "q_T: the last step's position and heading terms count again, times this."))
+    limit_weight: NonNegative = Field(1000.0, description=(
+        "q_lim of the squared excess of |v| over max_velocity and |omega| over max_yaw_rate, per step."))
+    max_velocity: Positive = Field(2.0, description="Soft limit on |v| of the rollouts [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Soft limit on |omega| of the rollouts [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> MPPI:
+        """The controller previewing ``trajectory``; it samples with the key the simulator hands to ``init``,
+        so ``key`` is unused."""
+        cost = MPPICost(position=self.position_weight, heading=self.heading_weight, velocity=self.velocity_weight,
+                        effort=self.effort_weight, terminal=self.terminal_weight, limit=self.limit_weight,
+                        max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate)
+        return MPPI(nominal, trajectory, cost=cost, model_step=self.model_step, control_period=control_period,
+                    temperature=self.temperature, noise_std=self.noise_std, samples=self.samples,
+                    horizon=self.horizon)
+
+
+ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig, LTVLQRConfig, SlidingModeConfig,
+                                   KinematicBacksteppingConfig, RegulatedPurePursuitConfig,
+                                   AdaptiveBacksteppingConfig, MPPIConfig],
+                             Field(discriminator="kind")]
 
 
 # --- the scenario --------------------------------------------------------------------------------
@@ -566,7 +789,11 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
     overrides : ``"section.key=value"`` strings; ``value`` is read as TOML (``1.5``, ``[1, 2]``,
         ``"pd"``) and as a plain string when it is not valid TOML
     seed : replaces ``simulation.seed``
-    controller : replaces ``controller.kind``
+    controller : replaces ``controller.kind`` before the overrides are applied. The file's
+        ``[controller]`` keys that its own kind accepts and the new kind does not (``gains`` when switching
+        backstepping to ``regulated_pure_pursuit``) are dropped; every other key is kept, so a shared
+        key (``max_velocity``) keeps its value and a key that no kind accepts (a typo) is still an error,
+        as is an override of a key the new kind lacks.
 
     Raises
     ------
@@ -575,17 +802,29 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
     """
     path = Path(path)
     data = read_toml(path, "scenario", "docs/scenarios.md")
+    if controller is not None:
+        switch_controller(data, controller)
     for override in overrides:
         apply_override(data, override)
     if seed is not None:
         data.setdefault("simulation", {})
         if isinstance(data["simulation"], dict):
             data["simulation"]["seed"] = seed
-    if controller is not None:
-        section = data.setdefault("controller", {})
-        if isinstance(section, dict):
-            section["kind"] = controller
     return validate_scenario(data, base_dir=path.parent)
+
+
+def switch_controller(data: dict[str, Any], kind: str) -> None:
+    """Set ``[controller] kind`` of a raw scenario dict in place, dropping the keys of the previous kind
+    that ``kind`` does not accept (see :func:`load_scenario`)."""
+    section = data.setdefault("controller", {})
+    if not isinstance(section, dict):
+        return  # not a table: validation names the problem
+    previous = section["kind"] if "kind" in section else "backstepping"  # as validate_scenario reads it
+    if isinstance(previous, str) and previous in CONTROLLERS and kind in CONTROLLERS:
+        old, new = CONTROLLERS[previous].model_fields, CONTROLLERS[kind].model_fields
+        for key in [k for k in section if k in old and k not in new]:
+            del section[key]
+    section["kind"] = kind
 
 
 def read_toml(path: Path, what: str, reference: str) -> dict[str, Any]:
@@ -717,6 +956,13 @@ class Setup:
     disturbance: WheelDisturbance
     noise: MeasurementNoise
     identification: Any = None  #: the emulator's identification, for controllers that have one
+    kinematic: bool = False  #: the controller drives the unicycle with ideal velocity tracking
+
+    @property
+    def plant(self) -> DynamicPlant | KinematicPlant:
+        """What the run simulates: the true robot (``plant_params``), or for a kinematic controller the
+        unicycle that applies (v, omega) at once (its [plant], [randomize] and [disturbance] have no effect)."""
+        return KinematicPlant() if self.kinematic else DynamicPlant(self.plant_params)
 
 
 def build(scenario: Scenario, plant_params: RobotParams | None = None,
@@ -732,15 +978,20 @@ def build(scenario: Scenario, plant_params: RobotParams | None = None,
     else:
         pose = scenario.initial.pose
     x0 = jnp.asarray([*pose, *scenario.initial.velocity], dtype=float)
+    config, key = scenario.controller, controller_key if controller_key is not None else jax.random.PRNGKey(0)
+    if isinstance(config, (RegulatedPurePursuitConfig, MPPIConfig)):  # they look ahead along the reference itself
+        controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
+    else:
+        controller = config.build(nominal, sim.control_period, key)
     return Setup(
         nominal=nominal,
         plant_params=plant_params if plant_params is not None else scenario.plant_params(),
-        controller=scenario.controller.build(nominal, sim.control_period,
-                                             controller_key if controller_key is not None else jax.random.PRNGKey(0)),
+        controller=controller,
         trajectory=trajectory,
         x0=x0,
         disturbance=scenario.disturbance.build(),
         noise=scenario.noise.build(),
+        kinematic=isinstance(config, KinematicBacksteppingConfig),
     )
 
 

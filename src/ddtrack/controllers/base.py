@@ -57,7 +57,8 @@ class Cascade:
     """An outer velocity law over an inner torque law, so baselines share inner loops (DESIGN 3).
 
     Logs: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s], ``saturated`` (1.0 when a velocity clamp or the
-    torque limit was active), plus the outer law's logs.
+    torque limit was active), plus the outer law's logs, plus ``inner.logs(memory)`` of an inner law
+    that has memory worth recording (e.g. adapted parameters), for the memory this period's torque used.
     """
 
     outer: Any
@@ -69,8 +70,10 @@ class Cascade:
     def step(self, t: Array, y: Array, ref: Reference, memory: tuple[Any, Any]) -> tuple[Array, Any, Logs]:
         outer_memory, inner_memory = memory
         command, outer_memory, outer_logs = self.outer.command(t, y, ref, outer_memory)
+        inner_logs = self.inner.logs(inner_memory) if hasattr(self.inner, "logs") else {}
         tau, torque_saturated, inner_memory = self.inner.torque(y, command, inner_memory)
         saturated = jnp.maximum(command.saturated, torque_saturated)
         outer_memory = self.outer.observe(outer_memory, saturated)
-        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": saturated, **outer_logs}
+        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": saturated,
+                **outer_logs, **inner_logs}
         return tau, (outer_memory, inner_memory), logs
