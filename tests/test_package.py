@@ -25,8 +25,9 @@ LAYERS = [
     {"scenario", "metrics", "identification"},
     {"runner", "plotting"},
     {"rundir"},
-    {"mc"},
+    {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep"},
+    {"suite"},
     {"cli"},
 ]
 def _short(seconds: int) -> list[str]:

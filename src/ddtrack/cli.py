@@ -67,11 +67,12 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
                    err=True)
         return 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
-    settle = metrics["settling_time"]
+    settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant
     click.echo(f"  e_tr over {window}: mean {metrics['e_tr_mean']:.4f} m, rms {metrics['e_tr_rms']:.4f} m, "
                f"max {metrics['e_tr_max']:.4f} m, final {metrics['e_tr_final']:.4f} m")
     click.echo(f"  settling (e_tr < {sim.settling_threshold:g} m): "
-               f"{'never' if settle is None else f'{settle:.2f} s'}; effort {metrics['effort']:.1f} N^2 m^2 s; "
+               f"{'never' if settle is None else f'{settle:.2f} s'}; "
+               f"effort {'none (no torques)' if effort is None else f'{effort:.1f} N^2 m^2 s'}; "
                f"saturated {100 * metrics['saturation_fraction']:.1f} % of the time")
     return 0
 
@@ -171,6 +172,57 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
 
 
 @cli.command()
+@click.argument("scenarios", nargs=-1, required=True, metavar="SCENARIO...", type=click.Path(path_type=Path))
+@click.option("--controller", default="backstepping", show_default=True, metavar="NAME",
+              help="The controller whose constant gains are tuned.")
+@click.option("--seeds", type=click.IntRange(min=1, max=1000), default=4, show_default=True,
+              help="Training seeds per scenario (0 .. N-1), on common random numbers.")
+@click.option("--steps", type=click.IntRange(min=1, max=10_000), default=40, show_default=True,
+              help="Gradient iterations (Adam on log-gains).")
+@click.option("--learning-rate", type=click.FloatRange(min=0.0, min_open=True, max=10.0), default=0.1,
+              show_default=True, help="Adam step size in log-gain units.")
+@click.option("--effort-weight", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
+              help="Weight of the effort term: loss += W * integral of tau_R^2 + tau_L^2 [m^2 / (N^2 m^2)].")
+@click.option("--gamma", type=(float, float, float), default=(1.0, 1.0, 0.0), show_default=True,
+              metavar="GX GY GTHETA", help="Weights of (e_x, e_y, e_theta) in the cost eq. 22; the default is e_tr^2.")
+@click.option("--whole-run", is_flag=True, help="Sum the cost over the whole run, not the scenario's metric window.")
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override every scenario.")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/tune"), show_default=True,
+              help="Folder for tuned.toml, loss.csv, loss.png, tune.json.")
+def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, learning_rate: float,
+         effort_weight: float, gamma: tuple[float, float, float], whole_run: bool, overrides: tuple[str, ...],
+         out: Path) -> int:
+    """Tune a controller's constant gains by gradient descent through whole simulated rollouts of SCENARIO...
+    (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
+    from .rundir import check_writable
+    from .scenario import load_scenario
+    from .tune import TUNABLE, problems, write
+    from .tune import tune as run_tuning
+
+    if controller not in TUNABLE:
+        raise ConfigError("--controller", f"'{controller}' has no tunable gains", f"choose one of: {', '.join(TUNABLE)}")
+    if min(gamma) < 0 or max(gamma) == 0:
+        raise ConfigError("--gamma", f"{gamma} must be >= 0 and not all 0", "e.g. --gamma 1 1 0 (the squared e_tr)")
+    specs = [load_scenario(path, overrides=overrides, controller=controller) for path in scenarios]
+    check_writable(out)
+    enable_compilation_cache()
+    initial = specs[0].controller.gains
+    with progress_bar(steps + 1, "tuning") as advance:
+        training = problems(specs, range(seeds))
+        result = run_tuning(training, initial, steps=steps, learning_rate=learning_rate, effort_weight=effort_weight,
+                            gamma=gamma, whole_run=whole_run, on_step=lambda record: advance(record["step"] + 1))
+    settings = {"scenarios": [str(p) for p in scenarios], "controller": controller, "seeds": seeds, "steps": steps,
+                "learning_rate": learning_rate, "effort_weight": effort_weight, "whole_run": whole_run, "gamma": list(gamma),
+                "overrides": list(overrides), "initial_gains": list(initial)}
+    write(out, result, controller, settings)
+    click.echo(f"gains {', '.join(f'{g:.4g}' for g in initial)} -> {', '.join(f'{g:.4g}' for g in result.gains)}; "
+               f"loss {result.initial_loss:.4g} -> {result.final_loss:.4g} "
+               f"({100 * (1 - result.final_loss / result.initial_loss):.1f} % lower)")
+    click.echo(f"wrote {out}/tuned.toml, loss.csv, loss.png, tune.json")
+    return 0
+
+
+@cli.command()
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
@@ -184,6 +236,58 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
 
     Without --scheduler or --scheduler-file, an embedded cluster on 127.0.0.1 runs it.
     """
+    check_cluster_options(scheduler, scheduler_file, workers)
+    from .sweep import plan_sweep, read_sweep, run_sweep
+
+    spec = read_sweep(sweep_file)
+    plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing
+    from .rundir import check_writable
+
+    check_writable(out)
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(len(plan.runs), "runs") as advance:
+        outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done))
+    click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
+               f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
+               f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
+    click.echo(f"wrote {out}/results.parquet, results.csv")
+    return 1 if outcome.errors or outcome.not_ok else 0
+
+
+@cli.command()
+@click.option("--suite", "suite_name", type=click.Choice(["quick", "standard"]), default="quick", show_default=True,
+              help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds.")
+@click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/bench"), show_default=True,
+              help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.")
+@click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler.")
+@click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
+              help="Use the running Dask scheduler described by FILE.")
+@click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
+              help="Worker processes of the embedded local cluster [default: CPU count].")
+def bench(suite_name: str, controllers: str | None, out: Path, scheduler: str | None, scheduler_file: Path | None,
+          workers: int | None) -> int:
+    """Rank controllers over trajectories, uncertainty levels and seeds on common random numbers, with a
+    robustness map over mass and friction; see docs/benchmarks.md."""
+    check_cluster_options(scheduler, scheduler_file, workers)
+    from .rundir import check_writable
+    from .suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
+
+    names = controller_names([c.strip() for c in controllers.split(",") if c.strip()] if controllers else None)
+    plan_suite(SUITES[suite_name], names, (1.0, 55.0, 15.0))  # every cell resolves: bad input writes nothing
+    check_writable(out)
+    enable_compilation_cache()
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        summary = run_suite(SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total))
+    from .sweep import read_records
+
+    click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
+    click.echo(f"{summary['runs']} runs ({summary['reused']} reused), {summary['not_ok']} diverged or non-finite, "
+               f"{summary['errors']} errors; wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, "
+               "robustness.png, boxplots.png")
+    return 1 if summary["errors"] else 0
+
+
+def check_cluster_options(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> None:
     if scheduler is not None and scheduler_file is not None:
         raise ConfigError("--scheduler", "give --scheduler or --scheduler-file, not both")
     if workers is not None and (scheduler is not None or scheduler_file is not None):
@@ -192,14 +296,14 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
     if scheduler_file is not None and not scheduler_file.is_file():
         raise ConfigError("--scheduler-file", f"'{scheduler_file}' does not exist",
                           "start the scheduler with `dask scheduler --scheduler-file FILE` first")
-    from .sweep import local_cluster, plan_sweep, read_sweep, run_sweep
 
-    spec = read_sweep(sweep_file)
-    plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing
-    from .rundir import check_writable
 
-    check_writable(out)
+@contextmanager
+def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> Iterator[object]:
+    """A client of the given scheduler, or of an embedded cluster on 127.0.0.1 (closed on exit)."""
     from distributed import Client
+
+    from .sweep import local_cluster
 
     cluster = None
     try:
@@ -212,16 +316,11 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
         else:
             cluster = local_cluster(workers or os.cpu_count() or 1)
             client = Client(cluster)
-        with client, progress_bar(len(plan.runs), "runs") as advance:
-            outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done))
+        with client:
+            yield client
     finally:
         if cluster is not None:
             cluster.close()
-    click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
-               f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
-               f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
-    click.echo(f"wrote {out}/results.parquet, results.csv")
-    return 1 if outcome.errors or outcome.not_ok else 0
 
 
 @contextmanager
@@ -236,8 +335,9 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
                   TextColumn("eta"), TimeRemainingColumn(), console=console, disable=not console.is_terminal) as bar:
         task = bar.add_task(label, total=total)
 
-        def advance(completed: int, description: str | None = None) -> None:
-            bar.update(task, completed=completed, description=description or label)
+        def advance(completed: int, description: str | None = None, total: int | None = None) -> None:
+            bar.update(task, completed=completed, description=description or label,
+                       **({} if total is None else {"total": total}))
 
         yield advance
 

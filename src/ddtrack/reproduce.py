@@ -38,6 +38,8 @@ VARIANTS = {"backstepping": ["controller.kind=backstepping"], "nn_adaptive": NN}
 ABLATIONS = {
     "nn_jacobian_analytic": [*NN, 'controller.jacobian="analytic"'],
     "nn_jacobian_quasi_static": [*NN, 'controller.jacobian="quasi_static"'],
+    "nn_jacobian_model": [*NN, 'controller.jacobian="model"'],
+    "nn_jacobian_model_sensitivity": [*NN, 'controller.jacobian="model_sensitivity"'],
     "nn_paper_error_jacobian": [*NN, 'controller.error_jacobian="paper"'],
     "nn_no_identification": [*NN, "controller.identification=false"],
     "nn_no_online_learning": [*NN, "controller.online_learning=false"],

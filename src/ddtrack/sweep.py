@@ -174,9 +174,11 @@ class Configuration:
     controller: str
     overrides: dict[str, Any]  #: the sweep's ``[set]`` values, then this configuration's grid or random values
     scenario: Scenario
+    labels: dict[str, Any] | None = None  #: descriptive columns (``label.<name>``), e.g. a benchmark suite's cell
 
     def describe(self) -> dict[str, Any]:
-        return {"controller": self.controller, "overrides": self.overrides}
+        described = {"controller": self.controller, "overrides": self.overrides}
+        return described | {"labels": self.labels} if self.labels else described
 
 
 @dataclass(frozen=True)
@@ -332,6 +334,7 @@ def table(records: Sequence[dict]) -> pa.Table:
     for r in records:
         row = {"key": r["key"], "controller": r["configuration"]["controller"], "seed": r["seed"],
                "status": r["status"], "error": r["error"]}
+        row |= {f"label.{k}": v for k, v in r["configuration"].get("labels", {}).items()}
         row |= {f"set.{k}": v for k, v in r["configuration"]["overrides"].items()}
         metrics = dict(r["metrics"] or {})
         window = metrics.pop("window", None) or [None, None]

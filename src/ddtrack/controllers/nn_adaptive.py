@@ -14,20 +14,20 @@ One control period (SPEC 3.8)::
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
-from ..geometry import body_increment, posture_error
+from ..geometry import body_increment, posture_error, rotation
 from ..trajectories import Reference
 from .backstepping import kanayama_command, velocity_command
 from .base import Logs, VelocityCommand
 from .nn import MLP, Scales, backprop, input_jacobian, momentum_step, sample_loss, zeros_like
 
-JACOBIANS = ("network", "analytic", "quasi_static")
+JACOBIANS = ("network", "analytic", "quasi_static", "model", "model_sensitivity")
 ERROR_JACOBIANS = ("exact", "paper")
 
 
@@ -78,6 +78,25 @@ def cost_gradient(error: Array, ref: Reference, gamma: Array, plant_jacobian_bod
     return (gamma * error) @ error_jacobian_body(error, exact) @ plant_jacobian_body @ gain_sensitivity(error, ref)
 
 
+def sensitivity_step(sensitivity: Array, y: Array, ref: Reference, gains: Array, plant_jacobian_body: Array,
+                     scale: Array, control_period: float) -> Array:
+    """Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J^n Phi(k), with J = R_3(theta) J_b^n c_bar
+    (SPEC 3.6 Mode B): the transition takes the real J, the input the normalised J^n = J / c_bar (``scale``), so
+    Sigma = (d q / d alpha) / c_bar, in the units of Mode A's J^n Phi. The clamps are ignored, as in Phi."""
+    theta, v = y[2], y[3]
+    world_jacobian = rotation(theta) @ plant_jacobian_body
+    command_of_pose = lambda q: kanayama_command(posture_error(q[0], q[1], q[2], ref.x, ref.y, ref.theta), ref, gains)  # noqa: E731
+    pose_rate_jacobian = jnp.array([[0.0, 0.0, -v * jnp.sin(theta)], [0.0, 0.0, v * jnp.cos(theta)], [0.0, 0.0, 0.0]])
+    transition = jnp.eye(3) + control_period * pose_rate_jacobian + scale * world_jacobian @ jax.jacfwd(command_of_pose)(y[:3])
+    error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+    return transition @ sensitivity + world_jacobian @ gain_sensitivity(error, ref)
+
+
+def sensitivity_gradient(error: Array, y: Array, gamma: Array, sensitivity: Array, exact: bool) -> Array:
+    """dJ/dalpha = e^T Gamma D Sigma, with D = D_b R_3(theta)^T the world-frame d e_p / d q (SPEC 3.3)."""
+    return (gamma * error) @ error_jacobian_body(error, exact) @ rotation(y[2]).T @ sensitivity
+
+
 class AdaptiveMemory(NamedTuple):
     gains: Array  #: current (Kx, Ky, Ktheta)
     last_step: Array  #: previous gain change, for the gain momentum
@@ -87,6 +106,7 @@ class AdaptiveMemory(NamedTuple):
     previous_input: Array  #: emulator input z_{k-1}
     previous_saturated: Array  #: 1.0 if a clamp or the torque limit acted at k-1
     started: Array  #: 1.0 once a transition exists to learn from
+    sensitivity: Array | None = None  #: Sigma = d q / d (Kx, Ky, Ktheta) (3x3), for jacobian "model_sensitivity"
 
 
 @pytree_dataclass
@@ -98,6 +118,13 @@ class NNAdaptiveBackstepping:
     With ``rates`` = 0 it is the backstepping controller exactly. Logs: ``kx, ky, ktheta``,
     ``emulator_loss`` (normalised sample loss of the online step), ``jacobian_v`` and ``jacobian_omega``
     (normalised J_b[0, 0] and J_b[2, 1] used by the gain law) and ``gate`` (1.0 when the gains moved).
+
+    ``jacobian`` picks J (SPEC 3.4): ``network`` (the emulator, eq. 34), ``analytic`` (a), ``quasi_static`` (b),
+    ``model`` (the exact one-step sensitivity of the nominal model under the inner loop, by automatic
+    differentiation: ``nominal_period``), or ``model_sensitivity``: that J in the multi-step forward sensitivity
+    recursion of SPEC 3.6's Mode B, Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J Phi(k), with the
+    gradient e^T Gamma D Sigma / c_bar. Sigma restarts from 0 whenever the gate is closed, so it covers the
+    trajectory since adaptation last resumed.
     """
 
     gains: Array  #: initial (Kx, Ky, Ktheta)
@@ -124,13 +151,15 @@ class NNAdaptiveBackstepping:
     learn_saturated: bool = static_field(default=False)
     structured_jacobian: bool = static_field(default=False)
     strict: bool = static_field(default=False)
+    nominal_period: Any = None  #: ddtrack.sim.NominalPeriod, for the "model" Jacobians
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> AdaptiveMemory:
         x0 = jnp.asarray(x0, float)
         gains = jnp.asarray(self.gains, float)
         n_in = self.emulator.scales.inputs.shape[0]
+        sensitivity = jnp.zeros((3, 3)) if self.jacobian == "model_sensitivity" else None
         return AdaptiveMemory(gains, jnp.zeros(3), self.emulator.mlp, zeros_like(self.emulator.mlp), x0[:3],
-                              jnp.zeros(n_in), jnp.asarray(0.0), jnp.asarray(0.0))
+                              jnp.zeros(n_in), jnp.asarray(0.0), jnp.asarray(0.0), sensitivity)
 
     def _plant_jacobian(self, mlp: MLP, nu_c: Array, nu: Array) -> Array:
         """Body-frame J_b^n (3x2) of the configured source, normalised by c_bar (SPEC 3.4)."""
@@ -139,6 +168,9 @@ class NNAdaptiveBackstepping:
             return jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])  # T_c S / T_c
         if self.jacobian == "analytic":
             return jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, c_w / c_v]])
+        if self.jacobian in ("model", "model_sensitivity"):
+            held = lambda c: VelocityCommand(c, jnp.zeros(2), jnp.zeros(2), jnp.asarray(0.0))  # noqa: E731
+            return self.nominal_period.jacobian(nu, nu_c, held) / c_v
         emulator = Emulator(mlp, self.emulator.scales, self.emulator.uses_velocity)
         jb = input_jacobian(mlp, emulator.scales, emulator.inputs(nu_c, nu))[:, :2] / c_v
         if self.structured_jacobian:  # keep the two direct channels, positive (SPEC 3.7 safeguards)
@@ -171,9 +203,15 @@ class NNAdaptiveBackstepping:
         gains = memory.gains
         nu_c_now = jnp.clip(kanayama_command(error, ref, gains), -limits, limits)
         jb = self._plant_jacobian(mlp, nu_c_now, nu)
-        gradient = cost_gradient(error, ref, jnp.asarray(self.gamma), jb, self.error_jacobian == "exact")
         gate = (started & (jnp.hypot(error[0], error[1]) < self.gate_error) & (memory.previous_saturated < 0.5)
                 & (t >= self.freeze_time))
+        sensitivity, c_v = memory.sensitivity, jnp.asarray(self.analytic_coefficients)[0]
+        if self.jacobian == "model_sensitivity":
+            gradient = sensitivity_gradient(error, y, jnp.asarray(self.gamma), sensitivity, self.error_jacobian == "exact")
+            advanced = sensitivity_step(sensitivity, y, ref, gains, jb, c_v, self.control_period)
+            sensitivity = jnp.where(gate, advanced, 0.0)
+        else:
+            gradient = cost_gradient(error, ref, jnp.asarray(self.gamma), jb, self.error_jacobian == "exact")
         initial = jnp.asarray(self.gains, float)
         step = (-self.control_period * jnp.asarray(self.rates) * gradient + self.gain_momentum * memory.last_step
                 - self.control_period * self.leakage * (gains - initial))
@@ -183,7 +221,7 @@ class NNAdaptiveBackstepping:
         # the Kanayama command with the new gains: the backstepping law's own code (so rates = 0 is it, bit for bit)
         command = velocity_command(error, nu, ref, gains, limits, self.strict)
         memory = AdaptiveMemory(gains, step, mlp, mlp_velocity, y[:3], self.emulator.inputs(command.nu_c, nu),
-                                command.saturated, jnp.asarray(1.0))
+                                command.saturated, jnp.asarray(1.0), sensitivity)
         logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2], "emulator_loss": loss,
                 "jacobian_v": jb[0, 0], "jacobian_omega": jb[2, 1], "gate": gate.astype(float)}
         return command, memory, logs

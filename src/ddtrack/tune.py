@@ -1,0 +1,160 @@
+"""``ddtrack tune``: a controller's constant gains tuned offline by gradient descent through whole rollouts.
+
+The loss is the paper's cost (eq. 22, J_k = e_k^T Gamma e_k / 2) summed over the control periods of each
+training run, times T_c, so a time integral [m^2 s], averaged over the training scenarios and seeds, plus an
+optional effort term ``effort_weight * integral (tau_R^2 + tau_L^2) dt``. The sum runs over the scenario's
+metric window by default (what the metrics and Table 1 score: on the paper's cases the whole run is dominated
+by the initial transient, during which the velocity clamps act and the gains hardly matter), or over the whole
+run (``whole_run``). Its gradient is ``jax.grad`` through
+the simulator's ``lax.scan`` (reverse mode through the RK4 substeps, the controller and its clamps). The gains are
+optimised in log space with Adam, so they stay positive, and clipped to ``[gain_min, gain_max]``.
+
+This gives the paper's online gain law (SPEC 3) a fair opponent: backstepping whose constant gains were chosen
+as well as the same cost allows on the same training runs, instead of by hand.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import tomli_w
+
+from .errors import ConfigError
+from .metrics import window_mask
+from .model import DynamicPlant
+from .rundir import atomic_write
+from .runner import prepare_batch
+from .scenario import Scenario
+from .sim import simulate_batch
+
+#: controllers whose gains can be tuned: kind -> the outer law's gain fields, in the scenario's ``gains`` order
+TUNABLE = {"backstepping": ("kx", "ky", "ktheta")}
+#: Gamma of eq. 22 by default: (1, 1, 0) makes J_k = e_tr^2 / 2, the tracking error the metrics and Table 1 score.
+#: The NN gain law's own (1, 50, 1) weighs the lateral error 50 times: tuned on it, backstepping trades a longer
+#: along-track lag for a smaller lateral error and ends with a larger e_tr (docs/tuning.md).
+DEFAULT_GAMMA = (1.0, 1.0, 0.0)
+
+
+class Problem(NamedTuple):
+    """One training scenario: its prepared batch of seeds and how to simulate it."""
+
+    scenario: Scenario
+    setup: object
+    draws: object
+
+
+class TuneResult(NamedTuple):
+    gains: tuple[float, ...]  #: the tuned gains
+    history: list[dict]  #: per iteration: loss, gains, gradient
+    initial_loss: float
+    final_loss: float
+
+
+def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Problem]:
+    """Each training scenario prepared once for all the seeds (one vmapped batch each)."""
+    for scenario in scenarios:
+        if scenario.controller.kind not in TUNABLE:
+            raise ConfigError("--controller", f"'{scenario.controller.kind}' has no tunable gains here",
+                              f"tune one of: {', '.join(TUNABLE)}")
+    return [Problem(scenario, *prepare_batch(scenario, list(seeds))) for scenario in scenarios]
+
+
+def rollout_loss(problem: Problem, gains: jax.Array, gamma: jax.Array, effort_weight: float,
+                 whole_run: bool = False) -> jax.Array:
+    """Mean over the batch's runs of sum_k (J_k (eq. 22) + effort_weight |tau_k|^2) T_c, over the metric window
+    (or the whole run)."""
+    sim = problem.scenario.simulation
+    fields = TUNABLE[problem.scenario.controller.kind]
+    controller = problem.setup.controller
+    runs = len(problem.setup.x0)
+    outer = dataclasses.replace(controller.outer, **{f: jnp.broadcast_to(gains[i], (runs,)) for i, f in enumerate(fields)})
+    result = simulate_batch(DynamicPlant(problem.setup.plant_params), dataclasses.replace(controller, outer=outer),
+                            problem.setup.trajectory, problem.setup.x0, problem.draws, problem.setup.disturbance,
+                            problem.setup.noise, n_steps=sim.n_steps, control_period=sim.control_period,
+                            substeps=sim.substeps, divergence_error=sim.divergence_error)
+    t = np.arange(sim.n_steps) * sim.control_period
+    counted = np.ones(sim.n_steps) if whole_run else window_mask(t, sim.window).astype(float)
+    per_period = 0.5 * jnp.sum(gamma * result.error**2, axis=-1) + effort_weight * jnp.sum(result.control**2, axis=-1)
+    return jnp.mean(jnp.sum(per_period * counted, axis=1)) * sim.control_period
+
+
+def total_loss(training: Sequence[Problem], log_gains: jax.Array, gamma: jax.Array, effort_weight: float,
+               whole_run: bool = False) -> jax.Array:
+    """The mean of :func:`rollout_loss` over the training scenarios, as a function of log(gains)."""
+    gains = jnp.exp(log_gains)
+    return sum(rollout_loss(p, gains, gamma, effort_weight, whole_run) for p in training) / len(training)
+
+
+def tune(training: Sequence[Problem], initial: Sequence[float], *, steps: int = 40, learning_rate: float = 0.1,
+         gamma: Sequence[float] = DEFAULT_GAMMA, effort_weight: float = 0.0, whole_run: bool = False,
+         gain_min: Sequence[float] = (0.05, 0.5, 0.05), gain_max: Sequence[float] = (20.0, 2000.0, 200.0),
+         on_step: Callable[[dict], None] = lambda record: None) -> TuneResult:
+    """Adam on log(gains) for ``steps`` iterations; keeps the best gains seen (the loss is not convex).
+
+    A step whose loss or gradient is not finite (a run that blew up) is undone and the step size halved.
+    """
+    gamma_array = jnp.asarray(gamma, float)
+    loss_and_grad = jax.jit(jax.value_and_grad(lambda lg: total_loss(training, lg, gamma_array, effort_weight, whole_run)))
+    low, high = np.log(np.asarray(gain_min, float)), np.log(np.asarray(gain_max, float))
+    log_gains = np.clip(np.log(np.asarray(initial, float)), low, high)
+    first, second = np.zeros_like(log_gains), np.zeros_like(log_gains)
+    rate, history = learning_rate, []
+    best = (math.inf, log_gains)
+    for step in range(steps + 1):  # the last evaluation only scores the final gains
+        loss, grad = (np.asarray(v, float) for v in loss_and_grad(jnp.asarray(log_gains)))
+        finite = bool(np.isfinite(loss) and np.all(np.isfinite(grad)))
+        record = {"step": step, "loss": float(loss) if finite else None,
+                  "gains": [float(g) for g in np.exp(log_gains)], "learning_rate": rate}
+        history.append(record)
+        on_step(record)
+        if finite and loss < best[0]:
+            best = (float(loss), log_gains)
+        if step == steps:
+            break
+        if not finite:  # back to the best point, smaller steps
+            log_gains, rate = best[1], rate / 2
+            continue
+        first = 0.9 * first + 0.1 * grad
+        second = 0.999 * second + 0.001 * grad**2
+        update = (first / (1 - 0.9 ** (step + 1))) / (np.sqrt(second / (1 - 0.999 ** (step + 1))) + 1e-8)
+        log_gains = np.clip(log_gains - rate * update, low, high)
+    if history[0]["loss"] is None:
+        raise ConfigError("controller.gains", "the initial gains already give non-finite runs",
+                          "start from gains that track, e.g. the scenario's own")
+    return TuneResult(tuple(float(g) for g in np.exp(best[1])), history, history[0]["loss"], best[0])
+
+
+def write(out: Path, result: TuneResult, kind: str, settings: dict) -> None:
+    """``tuned.toml`` (a scenario fragment: ``[controller]`` with the tuned gains), ``loss.csv``, ``tune.json``
+    and ``loss.png``, each written atomically."""
+    fragment = {"controller": {"kind": kind, "gains": list(result.gains)}}
+    header = "# ddtrack tune: paste into a scenario, or pass as --set controller.gains=[...]\n"
+    atomic_write(out / "tuned.toml", lambda f: f.write((header + tomli_w.dumps(fragment)).encode()))
+    lines = ["step,loss,kx,ky,ktheta,learning_rate"] + [
+        f"{r['step']},{'' if r['loss'] is None else repr(r['loss'])},{','.join(map(repr, r['gains']))},{r['learning_rate']!r}"
+        for r in result.history]
+    atomic_write(out / "loss.csv", lambda f: f.write(("\n".join(lines) + "\n").encode()))
+    summary = {"kind": kind, "gains": list(result.gains), "initial_loss": result.initial_loss,
+               "final_loss": result.final_loss, "settings": settings, "history": result.history}
+    atomic_write(out / "tune.json", lambda f: f.write((json.dumps(summary, indent=2) + "\n").encode()))
+    atomic_write(out / "loss.png", lambda f: _loss_figure(result, f))
+
+
+def _loss_figure(result: TuneResult, file) -> None:
+    import matplotlib.pyplot as plt
+
+    steps = [r["step"] for r in result.history if r["loss"] is not None]
+    losses = [r["loss"] for r in result.history if r["loss"] is not None]
+    fig, ax = plt.subplots(figsize=(6, 3.5), layout="constrained")
+    ax.semilogy(steps, losses, marker="o", markersize=3)
+    ax.set(xlabel="iteration", ylabel="loss: sum of J_k T_c (eq. 22)", title="ddtrack tune")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.savefig(file, format="png", dpi=120)
+    plt.close(fig)
