@@ -61,6 +61,29 @@ def improvement(baseline: float, candidate: float) -> float:
     return 100.0 * (baseline - candidate) / baseline
 
 
+def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
+    """Paired improvement of the pooled mean error, 100 (1 - sum(candidates) / sum(baselines)), with a delta-method
+    confidence interval of the ratio over the pairs; same keys as :func:`mean_ci`.
+
+    Unlike the mean of per-pair improvements, it stays finite when some baseline errors are near zero (an exact
+    model): each pair weighs by its baseline error. Pairs with a None on either side are counted as ``missing``.
+    """
+    from scipy import stats
+
+    pairs = [(b, c) for b, c in zip(baselines, candidates, strict=True) if b is not None and c is not None]
+    summary = {"mean": None, "ci_low": None, "ci_high": None, "n": len(pairs), "missing": len(baselines) - len(pairs)}
+    if not pairs or not sum(b for b, _ in pairs) > 0.0:
+        return summary
+    base, cand = np.asarray(pairs, dtype=float).T
+    ratio = cand.sum() / base.sum()
+    summary["mean"] = 100.0 * (1.0 - ratio)
+    if len(pairs) >= 2:  # var(ratio) ~ var(c_i - ratio b_i) / (n mean(b)^2), the ratio estimator's delta method
+        se = np.std(cand - ratio * base, ddof=1) / (np.sqrt(len(pairs)) * base.mean())
+        half = 100.0 * float(stats.t.ppf(0.5 + confidence / 2, len(pairs) - 1) * se)
+        summary |= {"ci_low": summary["mean"] - half, "ci_high": summary["mean"] + half}
+    return summary
+
+
 def mean_ci(values, confidence: float = 0.95) -> dict:
     """Mean and the two-sided Student-t confidence interval of the mean over independent values (seeds).
 

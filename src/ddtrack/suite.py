@@ -24,7 +24,7 @@ import pyarrow.csv  # noqa: F401  (pa.csv)
 import pyarrow.parquet as pq
 
 from .errors import ConfigError
-from .metrics import improvement, mean_ci
+from .metrics import mean_ci, pooled_improvement
 from .reproduce import scenario_path
 from .rundir import atomic_write
 from .scenario import CONTROLLERS, load_scenario
@@ -165,12 +165,9 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
         for key in STATISTICS:
             entry[key] = mean_ci([r.get(key) if r["status"] == "ok" else None for r in mine])
         for reference in (BASELINE, TUNED):
-            paired = []
-            for r in mine:
-                other = by_cell.get((reference, r["trajectory"], r["level"], r["seed"]))
-                if other and other.get("e_tr_mean") and r.get("e_tr_mean") is not None:
-                    paired.append(improvement(other["e_tr_mean"], r["e_tr_mean"]))
-            entry[f"improvement_over_{reference}"] = mean_ci(paired) if reference != name else None
+            others = [by_cell.get((reference, r["trajectory"], r["level"], r["seed"]), {}) for r in mine]
+            entry[f"improvement_over_{reference}"] = None if reference == name else pooled_improvement(
+                [o.get("e_tr_mean") for o in others], [r.get("e_tr_mean") for r in mine])
         board.append(entry)
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
 
