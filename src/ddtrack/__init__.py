@@ -16,6 +16,7 @@ from .metrics import improvement, summarize, tracking_error  # noqa: E402
 from .runner import monte_carlo, prepare, run, run_batch  # noqa: E402
 from .scenario import Scenario, load_scenario, validate_scenario  # noqa: E402
 from .sim import Draws, SimResult, simulate, timeseries  # noqa: E402
+from .envs import register_envs as _register_envs  # noqa: E402,F401  (registers ddtrack/DiffDriveTracking-v0)
 
 __version__ = "0.1.0"
 

@@ -31,6 +31,48 @@ class Draws(NamedTuple):
         return Draws(jnp.zeros((n_steps, 2)), jnp.zeros((n_steps, 5)), jax.random.PRNGKey(0))
 
 
+def plant_period(plant: Plant, x: Array, u: Array, t: Array, xi_disturbance: Array, *,
+                 disturbance: WheelDisturbance, control_period: float, substeps: int) -> tuple[Array, Array]:
+    """Advance the plant over one control period under the held input: the simulator's own step.
+
+    ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``substeps`` RK4 steps of
+    ``plant.derivative(., u, d)`` from ``plant.hold(x, u)`` over ``control_period``, both held (zero-order hold).
+    :func:`simulate` and the Gymnasium environment (``ddtrack.envs``) both call it, so they step alike.
+
+    Parameters
+    ----------
+    plant : a ``ddtrack.model.Plant``
+    x : (5,) state x_k = [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s]
+    u : (2,) plant input before saturation: wheel torques [N m], or (v, omega) for a kinematic plant
+    t : t_k [s]
+    xi_disturbance : (2,) this period's standard-normal disturbance draw
+    disturbance : the wheel-torque disturbance
+    control_period : T_c [s]
+    substeps : RK4 steps per period (static under ``jit``)
+
+    Returns
+    -------
+    (u, x_next) : the saturated input actually held [N m or m/s, rad/s], and x_{k+1}
+    """
+    u = plant.saturate(u)
+    tau_d = disturbance.torque(t, xi_disturbance)
+    x_next = rk4(lambda z: plant.derivative(z, u, tau_d), plant.hold(x, u), control_period, substeps)
+    return u, x_next
+
+
+def period_status(x: Array, x_next: Array, u: Array, error: Array, *, divergence_error: float = 50.0,
+                  divergence_speed: float = 50.0) -> Array:
+    """The status of one control period (``STATUS_NAMES``): 2 (``non_finite``) when x_{k+1} or the held input
+    is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds
+    ``divergence_error`` [m] or |v| [m/s] or |omega| [rad/s] of x_k exceeds ``divergence_speed``, else 0 (``ok``).
+
+    ``error`` is the posture error of x_k (SPEC 2.2); ``u`` the saturated input (:func:`plant_period`).
+    """
+    finite = jnp.all(jnp.isfinite(x_next)) & jnp.all(jnp.isfinite(u))
+    too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(x[3:5]) > divergence_speed)
+    return jnp.where(finite, jnp.where(too_far, 1, 0), 2)
+
+
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
 def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, draws: Draws, *,
              n_steps: int, control_period: float = 0.01, substeps: int = 10,
@@ -44,9 +86,11 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
             ref_k      = trajectory(t_k)
             y_k        = x_k + noise_std * xi_k          what the controller sees
             u_k, m     = controller.step(t_k, y_k, ref_k, m)
-            u_k        = plant.saturate(u_k)
-            d_k        = disturbance(t_k, draw_k)
-            x_{k+1}    = substeps x rk4(plant.derivative(., u_k, d_k), plant.hold(x_k, u_k), T_c / substeps)
+            u_k, x_{k+1} = plant_period(plant, x_k, u_k, t_k, draw_k):
+                u_k      = plant.saturate(u_k)
+                d_k      = disturbance(t_k, draw_k)
+                x_{k+1}  = substeps x rk4(plant.derivative(., u_k, d_k), plant.hold(x_k, u_k), T_c / substeps)
+            status_k   = period_status(x_k, x_{k+1}, u_k, e_p(x_k, ref_k))
             record x_k, ref_k, e_p(x_k, ref_k), u_k, logs_k
 
     Failure is a status, never an exception: the first k with a non-finite control or next state
@@ -74,15 +118,13 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
         ref = trajectory(t)
         y = noise.measure(x, xi_noise)
         u, next_memory, logs = controller.step(t, y, ref, memory)
-        u = plant.saturate(u)
-        tau_d = disturbance.torque(t, xi_disturbance)
-        x_next = rk4(lambda z: plant.derivative(z, u, tau_d), plant.hold(x, u), control_period, substeps)
+        u, x_next = plant_period(plant, x, u, t, xi_disturbance, disturbance=disturbance,
+                                 control_period=control_period, substeps=substeps)
         error = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
 
-        finite = jnp.all(jnp.isfinite(x_next)) & jnp.all(jnp.isfinite(u))
-        too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(x[3:5]) > divergence_speed)
         running = status == 0
-        new_status = jnp.where(running, jnp.where(finite, jnp.where(too_far, 1, 0), 2), status)
+        new_status = jnp.where(running, period_status(x, x_next, u, error, divergence_error=divergence_error,
+                                                      divergence_speed=divergence_speed), status)
         failure_index = jnp.where(running & (new_status != 0), k, failure_index)
         keep = new_status == 0
         x_next = jnp.where(keep, x_next, x)
