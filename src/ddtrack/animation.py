@@ -1,0 +1,538 @@
+"""Animations of a run: the robot's footprint following the reference (``ddtrack animate``).
+
+A frame shows, in the plane at true scale, the reference path, a dashed outline of the robot at the
+reference pose, the robot itself (body, both wheels, heading arrow) with its fading trail, the time and the
+tracking error; on a large map, a magnified view follows the robot, whose footprint is then small. When the
+gains moved during the run (NN-adaptive runs), a second panel plots Kx, Ky and Ktheta against time with
+a cursor at the frame's time. The input is the run's time-series columns (``timeseries.parquet`` of a run
+folder, or :func:`ddtrack.timeseries`) and its geometry (half axle L, wheel radius R).
+
+Frames sample the run at ``fps / speed`` frames per simulated second, at most ``max_frames`` of them (a
+longer run plays faster). GIF is written with Pillow through matplotlib's :class:`PillowWriter`, on one
+palette for every frame (no flicker, a fraction of the memory); MP4 through ffmpeg where it is on PATH.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless by default, as in plotting
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.animation import FFMpegWriter, PillowWriter  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.colors import to_rgba  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Polygon  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from .errors import ConfigError  # noqa: E402
+from .plotting import ADAPTIVE, REFERENCE, ROBOT  # noqa: E402
+from .scenario import Scenario, load_scenario  # noqa: E402
+
+Columns = Mapping[str, np.ndarray]
+GAINS = ("kx", "ky", "ktheta")
+MAX_FRAMES = 600  #: default bound on the frame count: a GIF of 600 frames is a few MB
+TRAIL_SECONDS = 8.0  #: how far back the fading trail reaches [s]
+TRAIL_POINTS = 100  #: samples of the trail drawn per frame (enough for a smooth fade)
+ZOOM_BEYOND = 40  #: a magnified view is added when the map spans more than this many half axles (the body
+#: is then under about 25 pixels wide)
+ZOOM_SIZE = 0.36  #: side of the magnified view, as a fraction of the map's
+SUFFIXES = (".gif", ".mp4")
+WHEEL = "#222222"
+
+
+@dataclass(frozen=True)
+class AnimationInfo:
+    """What :func:`animate` wrote.
+
+    Attributes
+    ----------
+    path : Path
+        The animation file.
+    frames : int
+        Number of frames.
+    fps : float
+        Frames per second of the file [1/s].
+    speed : float
+        Simulated seconds per second of playback; above the requested speed when ``max_frames`` bound the
+        frame count.
+    """
+
+    path: Path
+    frames: int
+    fps: float
+    speed: float
+
+
+def read_run(folder: str | Path) -> tuple[dict[str, np.ndarray], Scenario]:
+    """The time-series columns and the resolved scenario of a run folder (``ddtrack run --out DIR``).
+
+    Parameters
+    ----------
+    folder : str or Path
+        A run folder holding ``timeseries.parquet`` and ``scenario.toml``.
+
+    Returns
+    -------
+    columns : dict of str to ndarray
+        Every column of ``timeseries.parquet``, float64.
+    scenario : Scenario
+        ``scenario.toml``, validated.
+
+    Raises
+    ------
+    ConfigError
+        Naming what is missing or unreadable.
+    """
+    import pyarrow.parquet as pq
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ConfigError("", f"'{folder}' is not a folder", "give a run folder written by `ddtrack run --out DIR`")
+    missing = [name for name in ("timeseries.parquet", "scenario.toml") if not (folder / name).is_file()]
+    if missing:
+        raise ConfigError("", f"'{folder}' is not a run folder: {' and '.join(missing)} missing",
+                          "give a folder written by `ddtrack run --out DIR`")
+    try:
+        table = pq.read_table(folder / "timeseries.parquet")
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+        raise ConfigError("", f"'{folder / 'timeseries.parquet'}' cannot be read as Parquet ({exc})") from None
+    columns = {name: table.column(name).to_numpy().astype(float) for name in table.column_names}
+    needed = [name for name in ("t", "x", "y", "theta", "x_ref", "y_ref", "theta_ref", "e_tr") if name not in columns]
+    if needed:
+        raise ConfigError("", f"'{folder / 'timeseries.parquet'}' lacks the columns {', '.join(needed)}")
+    if columns["t"].size == 0:
+        raise ConfigError("", f"'{folder / 'timeseries.parquet'}' holds no rows")
+    return columns, load_scenario(folder / "scenario.toml")
+
+
+def frame_indices(t: np.ndarray, *, fps: float, speed: float, max_frames: int = MAX_FRAMES) -> tuple[np.ndarray, float]:
+    """Rows of the time series shown by each frame, and the playback speed they give.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times, increasing [s].
+    fps : float
+        Frames per second of playback [1/s], > 0.
+    speed : float
+        Simulated seconds per second of playback, > 0 (1 is real time).
+    max_frames : int
+        Bound on the frame count, >= 2; a run that would need more plays faster.
+
+    Returns
+    -------
+    indices : ndarray of int, shape (n_frames,)
+        Non-decreasing rows, the first and the last included: the row whose time is nearest each frame's time.
+    speed : float
+        The playback speed of those frames (``speed``, or higher when ``max_frames`` bound them).
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size == 0:
+        raise ValueError("the time series is empty")
+    if not (fps > 0 and speed > 0 and max_frames >= 2):
+        raise ValueError(f"need fps > 0, speed > 0, max_frames >= 2 (got {fps}, {speed}, {max_frames})")
+    duration = float(t[-1] - t[0])
+    step = speed / fps  # simulated seconds per frame
+    n = int(np.floor(duration / step + 1e-9)) + 1
+    if n > max_frames:
+        n, step = max_frames, duration / (max_frames - 1)
+    times = t[0] + step * np.arange(n)
+    if duration > 0 and times[-1] < t[-1] - 1e-9:
+        times = np.append(times, t[-1])  # the last frame shows how the run ended
+        if times.size > max_frames:
+            times = np.linspace(t[0], t[-1], max_frames)
+            step = duration / (max_frames - 1)
+    right = np.clip(np.searchsorted(t, times), 0, t.size - 1)
+    left = np.maximum(right - 1, 0)
+    rows = np.where(np.abs(t[left] - times) <= np.abs(t[right] - times), left, right)
+    return rows, step * fps  # a row may repeat (a slow-motion frame rate above the sampling rate)
+
+
+def footprint(x: float, y: float, theta: float, *, half_axle: float, wheel_radius: float) -> dict[str, np.ndarray]:
+    """Outline of the robot at pose (x, y, theta) in world coordinates.
+
+    Parameters
+    ----------
+    x, y : float
+        Position of the axle midpoint [m].
+    theta : float
+        Heading [rad].
+    half_axle : float
+        L, half the wheel separation [m] (the wheels' mid-planes are at +-L).
+    wheel_radius : float
+        R [m]; a wheel is drawn 2R long and R/2 wide.
+
+    Returns
+    -------
+    dict
+        ``body`` (4, 2) corners of the chassis, ``right_wheel`` and ``left_wheel`` (4, 2) corners of the
+        wheels [m], ``arrow`` (2, 2): the heading arrow's tail and tip [m].
+    """
+    L, R = half_axle, wheel_radius
+    wheel_w = 0.5 * R
+    body_half_width = max(L - wheel_w, 0.5 * L)  # inside the wheels
+    rear, front = -0.7 * L, 0.9 * L
+
+    def box(x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
+    c, s = np.cos(theta), np.sin(theta)
+    rotation = np.array([[c, -s], [s, c]])
+
+    def world(points: np.ndarray) -> np.ndarray:
+        return points @ rotation.T + np.array([x, y])
+
+    return {
+        "body": world(box(rear, front, -body_half_width, body_half_width)),
+        "right_wheel": world(box(-R, R, -L - wheel_w / 2, -L + wheel_w / 2)),
+        "left_wheel": world(box(-R, R, L - wheel_w / 2, L + wheel_w / 2)),
+        "arrow": world(np.array([[0.0, 0.0], [1.6 * L, 0.0]])),
+    }
+
+
+def gains_moved(columns: Columns) -> bool:
+    """True when the columns hold ``kx, ky, ktheta`` and at least one of them changed during the run."""
+    return all(name in columns for name in GAINS) and any(np.ptp(np.asarray(columns[n], float)) > 0 for n in GAINS)
+
+
+def _limits(columns: Columns, margin: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    xs = np.concatenate([columns["x"], columns["x_ref"]])
+    ys = np.concatenate([columns["y"], columns["y_ref"]])
+    xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
+    return (xs.min() - margin, xs.max() + margin), (ys.min() - margin, ys.max() + margin)
+
+
+def _figure_size(aspect: float, with_gains: bool, dpi: float) -> tuple[float, float]:
+    """Width and height [in]: 6.4 wide for the map alone, its height following the map's aspect (height / width)
+    within limits; 10.8 x 5.6 with the gains panel. Whole pixels, an even number of them (as H.264 needs)."""
+    width, height = (10.8, 5.6) if with_gains else (6.4, 1.4 + 4.6 * min(max(aspect, 0.45), 1.2))
+    return tuple(2 * round(size * dpi / 2) / dpi for size in (width, height))
+
+
+def _emptiest_corner(c: Columns, x_lim: tuple[float, float], y_lim: tuple[float, float], *,
+                     size: float) -> tuple[float, float, float, float]:
+    """Where, in axes fractions, a square inset of side ``size`` covers the fewest points of either path: a
+    corner, an edge's middle or the centre (the inside of a square path), preferring the lower right."""
+    points = np.concatenate([np.column_stack([c["x"], c["y"]]), np.column_stack([c["x_ref"], c["y_ref"]])])
+    points = points[np.all(np.isfinite(points), axis=1)]
+    fraction = (points - [x_lim[0], y_lim[0]]) / [np.ptp(x_lim), np.ptp(y_lim)]
+    pad = 0.02
+    places = [(a, b) for b in (pad, (1 - size) / 2, 1 - size - pad) for a in (1 - size - pad, pad, (1 - size) / 2)]
+    covered = [np.count_nonzero(np.all((fraction >= [a - pad, b - pad]) & (fraction <= [a + size + pad, b + size + pad]),
+                                       axis=1)) for a, b in places]
+    a, b = places[int(np.argmin(covered))]  # argmin keeps the first of equals: the preferred order above
+    return (a, b, size, size)
+
+
+class _Robot:
+    """The patches of one footprint, moved by :meth:`place`."""
+
+    def __init__(self, ax, *, half_axle: float, wheel_radius: float, color: str, outline: bool) -> None:
+        self.geometry = {"half_axle": half_axle, "wheel_radius": wheel_radius}
+        style = ({"fill": False, "ec": color, "lw": 1.0, "ls": "--"} if outline
+                 else {"fc": to_rgba(color, 0.55), "ec": color, "lw": 1.2})
+        zero = np.zeros((4, 2))
+        self.body = ax.add_patch(Polygon(zero, closed=True, zorder=4, **style))
+        wheel_style = style if outline else {"fc": WHEEL, "ec": WHEEL, "lw": 0.8}
+        self.wheels = [ax.add_patch(Polygon(zero, closed=True, zorder=5, **wheel_style)) for _ in range(2)]
+        self.arrow = None if outline else ax.add_line(plt.Line2D([], [], color=color, lw=1.6, zorder=6))
+        self.tip = None if outline else ax.add_line(plt.Line2D([], [], marker=(3, 0, 0), ms=6, color=color, zorder=6))
+
+    def place(self, x: float, y: float, theta: float) -> None:
+        shape = footprint(x, y, theta, **self.geometry)
+        self.body.set_xy(shape["body"])
+        self.wheels[0].set_xy(shape["right_wheel"])
+        self.wheels[1].set_xy(shape["left_wheel"])
+        if self.arrow is not None:
+            self.arrow.set_data(shape["arrow"][:, 0], shape["arrow"][:, 1])
+            self.tip.set_data([shape["arrow"][1, 0]], [shape["arrow"][1, 1]])
+            self.tip.set_marker((3, 0, np.degrees(theta) - 90.0))  # a triangle pointing along the heading
+
+    @property
+    def artists(self) -> list:
+        """Every artist of the footprint, in drawing order."""
+        return [self.body, *self.wheels, *(a for a in (self.arrow, self.tip) if a is not None)]
+
+
+@dataclass
+class _Scene:
+    fig: Figure
+    draw: Callable[[int], None]  #: updates every moving artist to a row of the time series
+    moving: list  #: the artists draw() changes, in drawing order
+
+
+def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: str, zoom: bool, dpi: float) -> _Scene:
+    missing = [name for name in ("t", "x", "y", "theta", "x_ref", "y_ref", "theta_ref", "e_tr") if name not in columns]
+    if missing:
+        raise ValueError(f"the time series lacks the columns {', '.join(missing)}")
+    c = {name: np.asarray(value, dtype=float) for name, value in columns.items()}
+    t = c["t"]
+    with_gains = gains_moved(c)
+    x_lim, y_lim = _limits(c, margin=2.5 * half_axle)
+    fig = plt.figure(figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi,
+                     layout="constrained")
+    if with_gains:
+        grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1.0))
+        ax = fig.add_subplot(grid[:, 0])
+        gain_axes = [fig.add_subplot(grid[i, 1]) for i in range(3)]
+    else:
+        ax, gain_axes = fig.add_subplot(), []
+    if title:
+        fig.suptitle(title, fontsize=11)
+
+    ax.set(xlim=x_lim, ylim=y_lim, aspect="equal", xlabel="x [m]", ylabel="y [m]")
+    ax.grid(alpha=0.25)
+    ax.plot(c["x_ref"], c["y_ref"], "--", color=REFERENCE, lw=1.0, label="reference", zorder=1)
+    views = [ax]
+    zoom_ax = None
+    if zoom and max(np.ptp(x_lim), np.ptp(y_lim)) > ZOOM_BEYOND * half_axle:
+        zoom_ax = ax.inset_axes(_emptiest_corner(c, x_lim, y_lim, size=ZOOM_SIZE))
+        zoom_ax.set(aspect="equal", xticks=[], yticks=[])
+        zoom_ax.set_facecolor("#fbfbfb")
+        for side in zoom_ax.spines.values():
+            side.set_color("#999999")
+        zoom_ax.plot(c["x_ref"], c["y_ref"], "--", color=REFERENCE, lw=1.0, zorder=1)
+        zoom_ax.text(0.03, 0.97, "zoom", transform=zoom_ax.transAxes, ha="left", va="top", fontsize=7, color="#777777")
+        views.append(zoom_ax)
+
+    travelled = [view.plot(c["x"][:1], c["y"][:1], color=ROBOT, lw=0.6, alpha=0.35, zorder=2)[0] for view in views]
+    trails = [view.add_collection(LineCollection([], lw=2.2, zorder=3)) for view in views]
+    ghosts = [_Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=REFERENCE, outline=True)
+              for view in views]
+    robots = [_Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=ROBOT, outline=False)
+              for view in views]
+    ax.plot([], [], color=ROBOT, lw=2.2, label="robot and its trail")  # legend entries for the patches
+    ax.plot([], [], ls="none", marker="s", mfc="none", mec=REFERENCE, label="reference pose")
+    fig.legend(loc="outside lower center", ncols=3, fontsize=8, frameon=False)  # off the map: a robot never hides it
+    clock = ax.text(0.0, 1.015, "", transform=ax.transAxes, ha="left", va="bottom", fontsize=9, family="monospace")
+
+    cursors = []
+    for gain_ax, name, label in zip(gain_axes, GAINS, ("$K_x$", "$K_y$", r"$K_\theta$"), strict=False):
+        gain_ax.plot(t, c[name], color=ADAPTIVE, lw=0.9, alpha=0.3)
+        (done,) = gain_ax.plot(t[:1], c[name][:1], color=ADAPTIVE, lw=1.6)
+        cursors.append((gain_ax.axvline(t[0], color="#555555", lw=0.8), done, c[name]))
+        gain_ax.set_ylabel(label)
+        gain_ax.set_xlim(t[0], max(t[-1], t[0] + 1e-9))  # a one-row run has no time span
+        gain_ax.grid(alpha=0.3)
+    if gain_axes:
+        gain_axes[0].set_title("adapted gains", fontsize=10)
+        for gain_ax in gain_axes[:-1]:
+            gain_ax.tick_params(labelbottom=False)
+        gain_axes[-1].set_xlabel("t [s]")
+
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    trail_rows = max(int(round(TRAIL_SECONDS / dt)), 2)
+    zoom_half = 4.0 * half_axle
+    robot_color = np.asarray(to_rgba(ROBOT))
+
+    def draw(row: int) -> None:
+        first = max(row - trail_rows, 0)
+        rows = np.arange(row, first - 1, -max((row - first) // TRAIL_POINTS, 1))[::-1]
+        points = np.column_stack([c["x"][rows], c["y"][rows]])
+        segments = np.stack([points[:-1], points[1:]], axis=1)
+        colors = np.tile(robot_color, (len(segments), 1))
+        colors[:, 3] = np.linspace(0.05, 1.0, len(segments))  # fading towards the past
+        for line, trail in zip(travelled, trails, strict=True):
+            line.set_data(c["x"][: row + 1], c["y"][: row + 1])
+            trail.set_segments(segments)
+            trail.set_color(colors)
+        for ghost, robot in zip(ghosts, robots, strict=True):
+            ghost.place(c["x_ref"][row], c["y_ref"][row], c["theta_ref"][row])
+            robot.place(c["x"][row], c["y"][row], c["theta"][row])
+        if zoom_ax is not None:
+            zoom_ax.set_xlim(c["x"][row] - zoom_half, c["x"][row] + zoom_half)
+            zoom_ax.set_ylim(c["y"][row] - zoom_half, c["y"][row] + zoom_half)
+        clock.set_text(f"t = {t[row]:6.2f} s    e_tr = {c['e_tr'][row]:.3f} m")
+        for cursor, done, values in cursors:
+            cursor.set_xdata([t[row], t[row]])
+            done.set_data(t[: row + 1], values[: row + 1])
+
+    draw(0)
+    main = [travelled[0], trails[0], *ghosts[0].artists, *robots[0].artists]
+    moving = [*main, *([zoom_ax] if zoom_ax is not None else []), clock,
+              *(artist for cursor, done, _ in cursors for artist in (done, cursor))]
+    return _Scene(fig, draw, moving)
+
+
+def animation_figure(columns: Columns, *, half_axle: float, wheel_radius: float, title: str = "",
+                     zoom: bool = True, dpi: float = 100) -> tuple[Figure, Callable[[int], None]]:
+    """The animation's figure and ``draw(row)``, which shows the run at that row of the time series.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray
+        Time-series columns of a run: at least ``t, x, y, theta, x_ref, y_ref, theta_ref, e_tr`` [s, m, rad];
+        ``kx, ky, ktheta`` add the gains panel when they moved.
+    half_axle, wheel_radius : float
+        The robot's L and R [m], as in its scenario's ``[plant]`` (or ``[robot]``).
+    title : str
+        Figure title, e.g. the scenario name and the controller.
+    zoom : bool
+        Add a magnified view following the robot when the path is much larger than the robot.
+    dpi : float
+        Resolution [dots per inch]; the figure is 6.4 inches wide, its height following the map's aspect;
+        10.8 x 5.6 inches with the gains panel.
+
+    Returns
+    -------
+    fig : Figure
+        The figure, showing the first row.
+    draw : callable
+        ``draw(row)`` moves every artist to row ``row`` (0 <= row < N); then ``fig.savefig`` a frame.
+    """
+    scene = _scene(columns, half_axle=half_axle, wheel_radius=wheel_radius, title=title, zoom=zoom, dpi=dpi)
+    return scene.fig, scene.draw
+
+
+class _Blitter:
+    """Renders frames by blitting: the still parts (axes, ticks, the reference path, the gain curves) are drawn
+    once; each frame restores them and draws only the moving artists (10 to 20 times faster than a full draw)."""
+
+    def __init__(self, scene: _Scene) -> None:
+        self.scene = scene
+        canvas = scene.fig.canvas
+        canvas.draw()  # constrained layout, once
+        scene.fig.set_layout_engine("none")  # frozen, so the background stays valid
+        for artist in scene.moving:
+            artist.set_animated(True)
+        canvas.draw()
+        self.background = canvas.copy_from_bbox(scene.fig.bbox)
+
+    def frame(self, row: int) -> Image.Image:
+        self.scene.draw(row)
+        canvas = self.scene.fig.canvas
+        canvas.restore_region(self.background)
+        for artist in self.scene.moving:
+            self.scene.fig.draw_artist(artist)
+        width, height = canvas.get_width_height(physical=True)
+        return Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
+
+
+class _BlitPillowWriter(PillowWriter):
+    """:class:`PillowWriter` fed by the blitter instead of a full ``savefig`` per frame, keeping each frame as
+    8-bit indices into one palette: a quarter of the memory of RGB frames, and no colour flicker."""
+
+    def __init__(self, *, fps: float, palette: Image.Image) -> None:
+        super().__init__(fps=fps)
+        self._palette = palette
+        self.image: Image.Image | None = None
+
+    def grab_frame(self, **savefig_kwargs) -> None:
+        self._frames.append(self.image.quantize(palette=self._palette, dither=Image.Dither.NONE))
+
+    def finish(self) -> None:
+        frames, self._frames = self._frames, []
+        frames.reverse()
+
+        def handed_over():  # Pillow copies each frame it encodes: drop ours as it goes, so only one set is held
+            while frames:
+                yield frames.pop()
+
+        first = frames.pop()
+        first.save(self.outfile, format="GIF", save_all=True, append_images=handed_over(),
+                   duration=round(1000 / self.fps), loop=0)
+
+
+def animate(columns: Columns, out: str | Path, *, half_axle: float, wheel_radius: float, fps: float = 20.0,
+            speed: float = 2.0, max_frames: int = MAX_FRAMES, title: str = "", zoom: bool = True,
+            dpi: float = 100) -> AnimationInfo:
+    """Write an animation of a run to ``out`` (``.gif`` with Pillow, ``.mp4`` with ffmpeg), atomically.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray
+        The run's time-series columns (see :func:`animation_figure`).
+    out : str or Path
+        The file to write; its suffix picks the format. It is rendered under a temporary name in the same
+        folder and renamed into place, so a failure leaves no partial file.
+    half_axle, wheel_radius : float
+        The robot's L and R [m].
+    fps : float
+        Frames per second of the file [1/s].
+    speed : float
+        Simulated seconds per second of playback (1 = real time).
+    max_frames : int
+        Bound on the frame count; a longer run plays faster (see the returned speed).
+    title : str
+        Figure title.
+    zoom : bool
+        Add a magnified view following the robot when the path is much larger than the robot.
+    dpi : float
+        Resolution: a frame is 640 pixels wide at 100 dpi, its height following the map's aspect; 1080 x 560
+        with the gains panel.
+
+    Returns
+    -------
+    AnimationInfo
+        The path, frame count, fps and the playback speed.
+
+    Raises
+    ------
+    ConfigError
+        For a suffix other than ``.gif`` and ``.mp4``, or ``.mp4`` without ffmpeg on PATH.
+    """
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ConfigError("--out", f"'{out.name}': an animation is written as .gif or .mp4", "e.g. --out run.gif")
+    if suffix == ".mp4" and not (shutil.which("ffmpeg") and FFMpegWriter.isAvailable()):
+        raise ConfigError("--out", f"writing '{out.name}' needs ffmpeg on PATH, and it is not there",
+                          "install ffmpeg (e.g. apt install ffmpeg), or write a .gif (Pillow, no ffmpeg needed)")
+    rows, played = frame_indices(np.asarray(columns["t"], float), fps=fps, speed=speed, max_frames=max_frames)
+    scene = _scene(columns, half_axle=half_axle, wheel_radius=wheel_radius, title=title, zoom=zoom, dpi=dpi)
+    try:
+        if suffix == ".gif":
+            blitter = _Blitter(scene)
+            # the last frame holds every colour the others use (the whole path, the gains)
+            palette = blitter.frame(int(rows[-1])).quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+            writer = _BlitPillowWriter(fps=fps, palette=palette)
+
+            def render(path: Path) -> None:
+                with writer.saving(scene.fig, str(path), dpi):
+                    for row in rows:
+                        writer.image = blitter.frame(int(row))
+                        writer.grab_frame()
+        else:
+            writer = FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])
+
+            def render(path: Path) -> None:
+                scene.fig.canvas.draw()
+                scene.fig.set_layout_engine("none")  # the same layout in every frame
+                with writer.saving(scene.fig, str(path), dpi):
+                    for row in rows:
+                        scene.draw(int(row))
+                        writer.grab_frame()
+
+        _write_atomically(out, render)
+    finally:
+        plt.close(scene.fig)
+    return AnimationInfo(path=out, frames=int(rows.size), fps=float(fps), speed=float(played))
+
+
+def _write_atomically(path: Path, render: Callable[[Path], None]) -> None:
+    """``render(tmp)`` to a temporary sibling of ``path``, then rename it into place (as rundir.atomic_write,
+    which is above this module's layer; a writer such as ffmpeg needs a file name, not a file object)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        render(tmp)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # mkstemp's 0600 would hide the file from the user's group
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+__all__ = ["AnimationInfo", "animate", "animation_figure", "footprint", "frame_indices", "gains_moved", "read_run"]
