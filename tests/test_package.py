@@ -24,6 +24,7 @@ LAYERS = [
     {"sim"},
     {"scenario", "metrics", "identification"},
     {"runner", "plotting"},
+    {"animation", "schema"},
     {"rundir"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep"},
@@ -130,6 +131,57 @@ def test_public_api_is_documented():
     for name in ddtrack.__all__:
         obj = getattr(ddtrack, name)
         assert inspect.getdoc(obj), f"ddtrack.{name} has no docstring"
+
+
+def _is_protocol(node: ast.ClassDef) -> bool:
+    return any(isinstance(base, (ast.Name, ast.Subscript)) and ast.unparse(base).startswith("Protocol")
+               for base in node.bases)
+
+
+def test_every_public_function_and_class_has_a_docstring():
+    """Top-level functions and classes without a leading underscore, in every module; and the methods of the
+    protocols (their docstrings are the calling convention that implementations follow)."""
+    missing = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        where = path.relative_to(PACKAGE)
+        for node in ast.parse(path.read_text()).body:
+            if not isinstance(node, (ast.FunctionDef, ast.ClassDef)) or node.name.startswith("_"):
+                continue
+            if not ast.get_docstring(node):
+                missing.append(f"{where}:{node.lineno} {node.name}")
+            if isinstance(node, ast.ClassDef) and _is_protocol(node):
+                missing += [f"{where}:{m.lineno} {node.name}.{m.name}" for m in node.body
+                            if isinstance(m, ast.FunctionDef) and not m.name.startswith("_") and not ast.get_docstring(m)]
+    assert missing == [], "no docstring: " + ", ".join(missing)
+
+
+def _section(doc: str, name: str) -> bool:
+    return re.search(rf"^{name}\n-{{3,}}$", doc, flags=re.M) is not None
+
+
+def test_the_public_api_has_numpydoc_sections():
+    """``ddtrack.__all__``: Parameters (Attributes for a record type) where there are arguments, Returns where
+    something is returned; and a docstring on every public method and property of its classes."""
+    for name in ddtrack.__all__:
+        obj = getattr(ddtrack, name)
+        doc = inspect.getdoc(obj)
+        try:
+            parameters = [p for p in inspect.signature(obj).parameters.values()
+                          if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+        except ValueError:  # an exception class without its own __init__
+            parameters = []
+        if inspect.isclass(obj):
+            if parameters:
+                assert _section(doc, "Parameters") or _section(doc, "Attributes"), f"ddtrack.{name}: no Parameters"
+            for member, value in vars(obj).items():
+                function = value.fget if isinstance(value, property) else getattr(value, "__func__", value)
+                if not member.startswith("_") and inspect.isfunction(function):
+                    assert inspect.getdoc(function), f"ddtrack.{name}.{member} has no docstring"
+            continue
+        if parameters:
+            assert _section(doc, "Parameters"), f"ddtrack.{name} has no Parameters section"
+        if inspect.signature(obj).return_annotation not in (None, "None", inspect.Signature.empty):
+            assert _section(doc, "Returns"), f"ddtrack.{name} has no Returns section"
 
 
 def test_ci_runs_the_readme_test_command():

@@ -287,7 +287,58 @@ def bench(suite_name: str, controllers: str | None, out: Path, scheduler: str | 
     return 1 if summary["errors"] else 0
 
 
+@cli.command()
+@click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), metavar="FILE",
+              help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH) [default: DIR/animation.gif].")
+@click.option("--fps", type=click.IntRange(min=1, max=50), default=20, show_default=True,
+              help="Frames per second of playback.")
+@click.option("--speed", type=click.FloatRange(min=0.01, max=1000.0), default=2.0, show_default=True,
+              help="Simulated seconds per second of playback (1 = real time).")
+def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
+    """Animate the run folder DIR (from `ddtrack run`): the robot's footprint following the reference with its
+    trail, and the adapted gains beside it when they moved. At most 600 frames: a longer run plays faster."""
+    from .animation import animate as write_animation
+    from .animation import read_run
+    from .rundir import check_writable
+
+    columns, spec = read_run(folder)
+    out = out if out is not None else folder / "animation.gif"
+    check_writable(out.parent)
+    plant = spec.plant_params()  # the true robot's geometry
+    info = write_animation(columns, out, half_axle=plant.half_axle, wheel_radius=plant.wheel_radius, fps=fps,
+                           speed=speed, title=f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}")
+    click.echo(f"wrote {out}: {info.frames} frames at {fps} fps, {info.speed:.3g} x real time")
+    return 0
+
+
+@cli.command()
+@click.option("--markdown", is_flag=True, help="Print the Markdown reference (docs/reference.md) instead.")
+def schema(markdown: bool) -> int:
+    """Print the JSON Schema of scenario files (every key, its type, default, bounds and unit)."""
+    import json
+
+    from .schema import scenario_schema, schema_markdown
+
+    click.echo(schema_markdown() if markdown else json.dumps(scenario_schema(), indent=2), nl=not markdown)
+    return 0
+
+
+@cli.command()
+@click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), metavar="FILE", help="The HTML file [default: DIR/report.html].")
+def report(folder: Path, out: Path | None) -> int:
+    """Write one self-contained HTML page (inline CSS and SVG; no script, no external resource: it opens
+    offline) for a run, reproduce, mc or bench folder DIR: the scenario, the metrics, the figures, the gains, and
+    for mc and bench the distributions."""
+    from .report import write_report
+
+    click.echo(f"wrote {write_report(folder, out=out)}")
+    return 0
+
+
 def check_cluster_options(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> None:
+    """Reject contradictory cluster options of ``sweep`` and ``bench`` before anything runs (exit code 2)."""
     if scheduler is not None and scheduler_file is not None:
         raise ConfigError("--scheduler", "give --scheduler or --scheduler-file, not both")
     if workers is not None and (scheduler is not None or scheduler_file is not None):

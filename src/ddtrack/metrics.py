@@ -10,7 +10,18 @@ WINDOW_TOLERANCE = 1e-9  # [s] sample times are k * T_c in floating point
 
 
 def tracking_error(e_x: np.ndarray, e_y: np.ndarray) -> np.ndarray:
-    """e_tr = sqrt(e_x^2 + e_y^2) = |(x_r - x, y_r - y)| [m] (paper eq. 35)."""
+    """e_tr = sqrt(e_x^2 + e_y^2) = |(x_r - x, y_r - y)| [m] (paper eq. 35).
+
+    Parameters
+    ----------
+    e_x, e_y : ndarray
+        Along-track and lateral posture errors [m] (SPEC 2.2), of one shape.
+
+    Returns
+    -------
+    ndarray
+        The tracking error [m], of that shape.
+    """
     return np.hypot(e_x, e_y)
 
 
@@ -55,7 +66,26 @@ def saturation_fraction(saturated: np.ndarray) -> float:
 
 
 def improvement(baseline: float, candidate: float) -> float:
-    """Percent reduction of the error from ``baseline`` to ``candidate``: 100 (E_BS - E_NN) / E_BS."""
+    """Percent reduction of the error from ``baseline`` to ``candidate``: 100 (E_BS - E_NN) / E_BS (the paper's
+    Table 1).
+
+    Parameters
+    ----------
+    baseline : float
+        The baseline's error E_BS, e.g. backstepping's mean e_tr [m]; must be > 0.
+    candidate : float
+        The candidate's error E_NN, in the same unit.
+
+    Returns
+    -------
+    float
+        The improvement [%]: positive when the candidate's error is lower, 100 when it is 0.
+
+    Raises
+    ------
+    ValueError
+        If ``baseline`` is not > 0.
+    """
     if not baseline > 0.0:
         raise ValueError(f"the baseline error must be > 0 to compare against it, got {baseline}")
     return 100.0 * (baseline - candidate) / baseline
@@ -110,6 +140,29 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
 
     Error statistics are over ``window``; settling time, effort and saturation fraction over the
     whole run. A failed run has every statistic None (JSON null) beside its status and failure time.
+
+    Parameters
+    ----------
+    columns : mapping of str to ndarray
+        The run's time series (:func:`ddtrack.timeseries`): ``t`` [s], ``e_tr`` [m], ``tau_r``, ``tau_l`` [N m],
+        and ``saturated``, ``kx``, ``ky``, ``ktheta`` where the controller logs them.
+    status : str
+        ``"ok"``, ``"diverged"`` or ``"non_finite"`` (:attr:`SimResult.status_name`).
+    window : (float, float)
+        Start and end of the error statistics [s] (``simulation.metric_window``).
+    control_period : float
+        T_c [s], the time each torque sample is held (for the effort integral).
+    settling_threshold : float
+        e_tr [m] below which the run counts as settled.
+    failure_time : float, optional
+        When a failed run failed [s].
+
+    Returns
+    -------
+    dict
+        ``status, window, e_tr_mean, e_tr_rms, e_tr_max, e_tr_final`` [m], ``settling_time`` [s] (None if
+        never), ``effort`` [N^2 m^2 s] (None without torques), ``saturation_fraction`` [0..1]; ``final_gains``
+        (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run.
     """
     metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
     keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")

@@ -73,6 +73,7 @@ def controller_keys(seed: int) -> tuple[jax.Array, jax.Array, jax.Array]:
 
 
 def needs_identification(scenario: Scenario) -> bool:
+    """True for an NN-adaptive controller whose emulator is pre-trained on an identification run (SPEC 3.7)."""
     return isinstance(scenario.controller, NNAdaptiveConfig) and scenario.controller.identification
 
 
@@ -83,6 +84,25 @@ def prepare(scenario: Scenario, *, seed: int | None = None, identification: Iden
     ``identification`` reuses an emulator identified for the same plant and seed (ablations that only
     change the gain law), instead of identifying again; ``identify=False`` skips it (a batch identifies
     all its runs at once).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario (:func:`ddtrack.load_scenario`).
+    seed : int, optional
+        Replaces ``simulation.seed``; split into the parameters, disturbance, noise and controller streams.
+    identification : Identification, optional
+        An emulator already identified for this plant and seed (NN-adaptive controllers only).
+    identify : bool
+        Pre-train an NN-adaptive controller's emulator now (SPEC 3.7).
+
+    Returns
+    -------
+    setup : Setup
+        The nominal model, the true plant (with its ``[randomize]`` draws), the controller, the trajectory,
+        the initial state, the disturbance and the noise models.
+    draws : Draws
+        The run's standard-normal draws (disturbance, noise) and the controller's PRNG key.
     """
     seed = scenario.simulation.seed if seed is None else seed
     keys = streams(seed)
@@ -153,7 +173,20 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
 
 
 def run_batch(scenario: Scenario, seeds: Sequence[int]) -> SimResult:
-    """Simulate one run per seed in one vmapped call; row i equals ``run(scenario, seed=seeds[i])``."""
+    """Simulate one run per seed in one vmapped call; row i equals ``run(scenario, seed=seeds[i])``.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario.
+    seeds : sequence of int
+        One run per seed.
+
+    Returns
+    -------
+    SimResult
+        Every array with a leading batch axis of ``len(seeds)`` (:func:`ddtrack.runner.row` takes one out).
+    """
     return run_setup(scenario, *prepare_batch(scenario, seeds), batched=True)
 
 
@@ -163,7 +196,20 @@ def row(result: SimResult, i: int) -> SimResult:
 
 
 def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
-    """Simulate a scenario once. Deterministic: the same scenario and seed give the same bits."""
+    """Simulate a scenario once. Deterministic: the same scenario and seed give the same bits.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario (:func:`ddtrack.load_scenario`).
+    seed : int, optional
+        Replaces ``simulation.seed``.
+
+    Returns
+    -------
+    SimResult
+        The run's time series and status (:func:`ddtrack.timeseries` turns it into NumPy columns).
+    """
     return run_setup(scenario, *prepare(scenario, seed=seed))
 
 
@@ -222,6 +268,23 @@ def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 6
     the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
 
     The last chunk is padded with repeats of its first seed, so every chunk has one shape and compiles once.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario; its ``[randomize]`` draws differ per seed.
+    seeds : sequence of int
+        One run per seed.
+    chunk_size : int
+        Runs per vmapped batch.
+    on_chunk : callable
+        Called with the number of runs done after each chunk (a progress bar).
+
+    Returns
+    -------
+    list of dict
+        Per seed: ``seed``, ``plant_<field>`` for each drawn plant parameter (in its unit), and the
+        :func:`ddtrack.summarize` metrics.
     """
     drawn = [field for field, draw in scenario.randomize if draw is not None]
     rows: list[dict] = []

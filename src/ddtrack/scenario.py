@@ -69,6 +69,8 @@ class _Section(BaseModel):
 
 
 class SimulationConfig(_Section):
+    """Timing of the run, its seed, and what its statistics cover."""
+
     duration: Positive = Field(40.0, description="Length of the run [s].")
     control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
     substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
@@ -128,24 +130,27 @@ class RobotConfig(_Section):
 class PlantConfig(_Section):
     """The true robot; every key left out takes the [robot] value."""
 
-    mass: Positive | None = None
-    inertia: Positive | None = None
-    com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = None
-    wheel_radius: Annotated[float, Field(gt=0.0, le=2.0)] | None = None
-    half_axle: Annotated[float, Field(gt=0.0, le=5.0)] | None = None
-    max_torque: Positive | None = None
-    viscous_friction: NonNegative | None = None
-    coulomb_friction: NonNegative | None = None
-    friction_smoothing: Positive | None = None
+    mass: Positive | None = Field(None, description="True total mass m [kg].")
+    inertia: Positive | None = Field(None, description="True yaw inertia about the centre of mass I_C [kg m^2].")
+    com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = Field(
+        None, description="True signed offset d of the centre of mass ahead of the axle [m].")
+    wheel_radius: Annotated[float, Field(gt=0.0, le=2.0)] | None = Field(None, description="True wheel radius R [m].")
+    half_axle: Annotated[float, Field(gt=0.0, le=5.0)] | None = Field(
+        None, description="True half wheel separation L [m].")
+    max_torque: Positive | None = Field(None, description="True torque limit per wheel [N m].")
+    viscous_friction: NonNegative | None = Field(None, description="True viscous wheel friction b_w [N m s/rad].")
+    coulomb_friction: NonNegative | None = Field(None, description="True Coulomb wheel friction tau_c [N m].")
+    friction_smoothing: Positive | None = Field(None, description="tanh smoothing wheel speed eps_f [rad/s].")
 
 
 class ParameterDraw(_Section):
     """A random plant parameter, drawn per run: value * (1 + r) (``relative``) or value + r (``absolute``),
     r uniform on [-spread, spread] or normal with std = spread truncated at 3 std."""
 
-    distribution: Literal["uniform", "normal"] = "uniform"
-    relative: NonNegative | None = None
-    absolute: NonNegative | None = None
+    distribution: Literal["uniform", "normal"] = Field("uniform", description=(
+        "r uniform on [-spread, spread], or normal with std = spread truncated at 3 std."))
+    relative: NonNegative | None = Field(None, description="Spread as a fraction of the value: value * (1 + r).")
+    absolute: NonNegative | None = Field(None, description="Spread in the parameter's unit: value + r.")
 
     @model_validator(mode="after")
     def _one_spread(self) -> ParameterDraw:
@@ -162,13 +167,17 @@ class ParameterDraw(_Section):
 
 
 class RandomizeConfig(_Section):
-    mass: ParameterDraw | None = None
-    inertia: ParameterDraw | None = None
-    com_offset: ParameterDraw | None = None
-    wheel_radius: ParameterDraw | None = None
-    half_axle: ParameterDraw | None = None
-    viscous_friction: ParameterDraw | None = None
-    coulomb_friction: ParameterDraw | None = None
+    """Plant parameters drawn per run from the run's seed, each an inline table; left out: not drawn."""
+
+    mass: ParameterDraw | None = Field(None, description="Draw of the plant's mass [kg].")
+    inertia: ParameterDraw | None = Field(None, description="Draw of the plant's yaw inertia I_C [kg m^2].")
+    com_offset: ParameterDraw | None = Field(None, description="Draw of the plant's centre-of-mass offset d [m].")
+    wheel_radius: ParameterDraw | None = Field(None, description="Draw of the plant's wheel radius R [m].")
+    half_axle: ParameterDraw | None = Field(None, description="Draw of the plant's half axle L [m].")
+    viscous_friction: ParameterDraw | None = Field(None, description=(
+        "Draw of the plant's viscous wheel friction b_w [N m s/rad]."))
+    coulomb_friction: ParameterDraw | None = Field(None, description=(
+        "Draw of the plant's Coulomb wheel friction tau_c [N m]."))
 
 
 # --- [disturbance], [noise] ----------------------------------------------------------------------
@@ -394,6 +403,8 @@ def read_waypoints(path: Path) -> list[Pair]:
 
 
 class InitialConfig(_Section):
+    """The robot's state at t = 0."""
+
     pose: tuple[float, float, float] | None = Field(None, description="[x, y, theta] of the axle midpoint; "
                                                                       "default the reference pose at t = 0.")
     velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
@@ -724,10 +735,24 @@ ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig, LTVLQRC
 
 
 class Scenario(_Section):
-    """A whole scenario file (DESIGN 4)."""
+    """A whole scenario file (DESIGN 4).
+
+    Every key, its unit, default and bounds: ``docs/reference.md`` (``ddtrack schema``).
+
+    Attributes
+    ----------
+    name : str
+        Name of the scenario; the default run folder is ``runs/NAME``.
+    description : str
+        Free text.
+    simulation, robot, plant, randomize, disturbance, noise, trajectory, initial, controller
+        The file's sections: the run's timing and seed, the nominal robot the controller believes in, the true
+        plant, its random draws, the wheel-torque disturbance, the measurement noise, the reference, the
+        initial state and the controller.
+    """
 
     name: str = Field(min_length=1, max_length=200, description="Name of the scenario.")
-    description: str = Field("", max_length=10_000)
+    description: str = Field("", max_length=10_000, description="Free text.")
     simulation: SimulationConfig = SimulationConfig()
     robot: RobotConfig = RobotConfig()
     plant: PlantConfig = PlantConfig()
@@ -785,15 +810,24 @@ def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int 
 
     Parameters
     ----------
-    path : the TOML file
-    overrides : ``"section.key=value"`` strings; ``value`` is read as TOML (``1.5``, ``[1, 2]``,
-        ``"pd"``) and as a plain string when it is not valid TOML
-    seed : replaces ``simulation.seed``
-    controller : replaces ``controller.kind`` before the overrides are applied. The file's
-        ``[controller]`` keys that its own kind accepts and the new kind does not (``gains`` when switching
-        backstepping to ``regulated_pure_pursuit``) are dropped; every other key is kept, so a shared
-        key (``max_velocity``) keeps its value and a key that no kind accepts (a typo) is still an error,
-        as is an override of a key the new kind lacks.
+    path : str or Path
+        The TOML file.
+    overrides : sequence of str
+        ``"section.key=value"`` strings; ``value`` is read as TOML (``1.5``, ``[1, 2]``, ``"pd"``) and as a
+        plain string when it is not valid TOML.
+    seed : int, optional
+        Replaces ``simulation.seed``.
+    controller : str, optional
+        Replaces ``controller.kind`` before the overrides are applied. The file's ``[controller]`` keys that
+        its own kind accepts and the new kind does not (``gains`` when switching backstepping to
+        ``regulated_pure_pursuit``) are dropped; every other key is kept, so a shared key (``max_velocity``)
+        keeps its value and a key that no kind accepts (a typo) is still an error, as is an override of a key
+        the new kind lacks.
+
+    Returns
+    -------
+    Scenario
+        The validated scenario, defaults filled in.
 
     Raises
     ------
@@ -847,7 +881,25 @@ def read_toml(path: Path, what: str, reference: str) -> dict[str, Any]:
 
 
 def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Scenario:
-    """Validate a scenario given as a dict; relative waypoint files are read from ``base_dir``."""
+    """Validate a scenario given as a dict; relative waypoint files are read from ``base_dir``.
+
+    Parameters
+    ----------
+    data : dict
+        The scenario as ``tomllib`` reads it (sections as dicts).
+    base_dir : Path
+        Folder that a ``[trajectory] file`` is relative to.
+
+    Returns
+    -------
+    Scenario
+        The validated scenario, defaults filled in.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first invalid field and how to fix it.
+    """
     controller = data.get("controller")
     if isinstance(controller, dict) and "kind" not in controller:  # a [controller] without kind is backstepping
         data = {**data, "controller": {"kind": "backstepping", **controller}}

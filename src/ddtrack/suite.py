@@ -69,6 +69,9 @@ TRAJECTORIES: dict[str, tuple[str, list[str]]] = {
 
 @dataclass(frozen=True)
 class Suite:
+    """A benchmark suite (``ddtrack bench --suite``): the cells run for every controller, the seeds per cell,
+    the robustness map's grid and the tuning budget of ``backstepping_tuned``."""
+
     trajectories: tuple[str, ...]
     levels: tuple[str, ...]
     seeds: int
@@ -181,6 +184,9 @@ def _ci(summary: dict | None, digits: int = 4) -> str:
 
 
 def board_markdown(board: list[dict], cells: dict) -> str:
+    """The leaderboard as Markdown (``leaderboard.md``): mean [95 % CI] of each statistic per controller, paired
+    improvements over backstepping and tuned backstepping, then mean e_tr [m] per trajectory and level
+    (``cells``, from :func:`cell_means`)."""
     lines = ["| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated | failures "
              "| vs backstepping [%] | vs tuned backstepping [%] |", "|" + "---|" * 9]
     for e in board:
@@ -198,6 +204,7 @@ def board_markdown(board: list[dict], cells: dict) -> str:
 
 
 def cell_means(records: dict[str, dict]) -> dict[tuple[str, str, str], float]:
+    """Mean e_tr_mean [m] over the successful seeds of each (controller, trajectory, level) of the leaderboard."""
     groups: dict[tuple, list[float]] = {}
     for r in _rows(records, "leaderboard"):
         if r["status"] == "ok" and r.get("e_tr_mean") is not None:
@@ -206,6 +213,8 @@ def cell_means(records: dict[str, dict]) -> dict[tuple[str, str, str], float]:
 
 
 def board_table(board: list[dict]) -> pa.Table:
+    """The leaderboard as a flat table (``leaderboard.csv``, ``.parquet``): one row per controller, a mean, a
+    ci_low and a ci_high column per statistic and improvement."""
     flat = []
     for e in board:
         row = {"controller": e["controller"], "runs": e["runs"], "failures": e["failures"]}

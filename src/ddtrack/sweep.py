@@ -183,6 +183,8 @@ class Configuration:
 
 @dataclass(frozen=True)
 class Plan:
+    """A sweep resolved before anything runs: every configuration and every run's key."""
+
     configurations: list[Configuration]
     runs: dict[str, tuple[int, int]]  #: key -> (configuration index, seed), in plan order
     chunk: int  #: runs per task (every task of the sweep is padded to this many, so each compiles once)
@@ -206,6 +208,7 @@ def toml_value(value: Any) -> str:
 
 
 def canonical(value: Any) -> str:
+    """``value`` as compact JSON with sorted keys: equal values give equal text (and run keys)."""
     return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
@@ -273,6 +276,7 @@ def run_chunk(scenario: Scenario, configuration: dict[str, Any], runs: Sequence[
 
 
 def error_record(key: str, configuration: dict[str, Any], seed: int, text: str) -> dict:
+    """The record of a run that raised: status ``error``, no metrics, the error's ``text``."""
     return {"key": key, "configuration": configuration, "seed": seed, "status": ERROR, "metrics": None, "error": text}
 
 
@@ -291,6 +295,7 @@ def _finite(value: Any) -> Any:
 
 
 def write_record(out: Path, record: dict) -> None:
+    """Write ``record`` to ``out/records/<key>.json``, atomically (a killed sweep leaves no partial record)."""
     text = json.dumps(record, indent=1, sort_keys=True, allow_nan=False) + "\n"
     atomic_write(out / RECORDS / f"{record['key']}.json", lambda f: f.write(text.encode()))
 
@@ -366,6 +371,8 @@ def write_results(out: Path, records: Sequence[dict]) -> pa.Table:
 
 @dataclass(frozen=True)
 class Outcome:
+    """What :func:`run_sweep` did: run counts by origin and status."""
+
     total: int  #: runs in the plan
     reused: int  #: found in the store at start
     ran: int  #: records written by this sweep

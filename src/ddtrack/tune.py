@@ -51,6 +51,10 @@ class Problem(NamedTuple):
 
 
 class TuneResult(NamedTuple):
+    """The outcome of :func:`tune`: the best gains seen, the descent's history, and its first and best loss
+    (:func:`total_loss`, the paper's cost eq. 22 integrated over each run's window; m^2 s with the default
+    weights)."""
+
     gains: tuple[float, ...]  #: the tuned gains
     history: list[dict]  #: per iteration: loss, gains, gradient
     initial_loss: float

@@ -23,9 +23,18 @@ Logs = dict[str, Array]
 
 
 class Controller(Protocol):
-    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+    """What the simulator needs of a controller: ``init`` once, then ``step`` every control period."""
 
-    def step(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[Array, Any, Logs]: ...
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
+        """The initial memory, from the initial state ``x0`` (5,), the reference at t = 0 and a PRNG ``key``
+        (the run's controller stream, for whatever the controller draws)."""
+        ...
+
+    def step(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[Array, Any, Logs]:
+        """One control period at time ``t`` [s] from the measured state ``y`` (5,) and the reference: the plant
+        input (wheel torques [N m], or (v [m/s], omega [rad/s]) for a kinematic plant), the next memory and
+        the logs."""
+        ...
 
 
 class VelocityCommand(NamedTuple):
@@ -38,18 +47,31 @@ class VelocityCommand(NamedTuple):
 
 
 class VelocityLaw(Protocol):
-    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+    """An outer (kinematic) law of a :class:`Cascade`: state and reference in, velocity command out."""
 
-    def command(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[VelocityCommand, Any, Logs]: ...
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
+        """The initial memory (see :meth:`Controller.init`)."""
+        ...
+
+    def command(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[VelocityCommand, Any, Logs]:
+        """The velocity command for time ``t`` [s] and measured state ``y`` (5,), the next memory, the logs."""
+        ...
 
     def observe(self, memory: Any, saturated: Array) -> Any:
         """Told after the inner loop whether this period saturated (1.0) or not; returns the memory."""
 
 
 class TorqueLaw(Protocol):
-    def init(self, x0: Array, ref0: Reference, key: Array) -> Any: ...
+    """An inner (dynamic) loop of a :class:`Cascade`: velocity command in, wheel torques out (SPEC 2.5, 2.6)."""
 
-    def torque(self, y: Array, command: VelocityCommand, memory: Any) -> tuple[Array, Array, Any]: ...
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
+        """The initial memory (see :meth:`Controller.init`)."""
+        ...
+
+    def torque(self, y: Array, command: VelocityCommand, memory: Any) -> tuple[Array, Array, Any]:
+        """Wheel torques (tau_R, tau_L) [N m] for the measured state ``y`` (5,), saturated at the nominal
+        ``max_torque``; 1.0 if the limit acted (else 0.0); the next memory."""
+        ...
 
 
 @pytree_dataclass

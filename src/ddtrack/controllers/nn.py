@@ -84,4 +84,5 @@ def momentum_step(mlp: MLP, velocity: MLP, gradient: MLP, *, learning_rate: Arra
 
 
 def zeros_like(mlp: MLP) -> MLP:
+    """An MLP of the same shapes with every weight and bias 0 (the initial momentum of the backpropagation)."""
     return jax.tree_util.tree_map(jnp.zeros_like, mlp)

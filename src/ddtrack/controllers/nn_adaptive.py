@@ -98,6 +98,9 @@ def sensitivity_gradient(error: Array, y: Array, gamma: Array, sensitivity: Arra
 
 
 class AdaptiveMemory(NamedTuple):
+    """Everything the NN-adaptive law evolves, carried between control periods (DESIGN 3): the gains, the
+    emulator and its momentum, and the previous sample it learns from (SPEC 3.6 to 3.8)."""
+
     gains: Array  #: current (Kx, Ky, Ktheta)
     last_step: Array  #: previous gain change, for the gain momentum
     mlp: MLP  #: emulator weights

@@ -21,11 +21,19 @@ class Plant(Protocol):
 
     input_kind: str  # "torque" [N m] or "velocity" [m/s, rad/s]
 
-    def hold(self, x: Array, u: Array) -> Array: ...
+    def hold(self, x: Array, u: Array) -> Array:
+        """The state at the start of a control period once the held input ``u`` applies (unchanged for torques;
+        the velocities replaced for a velocity input). ``x`` = [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]."""
+        ...
 
-    def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array: ...
+    def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
+        """X_dot under the held input ``u`` and the wheel disturbance torques ``tau_dist`` (2,) [N m]
+        (SPEC 1.3): [x_dot, y_dot, theta_dot, v_dot, omega_dot]."""
+        ...
 
-    def saturate(self, u: Array) -> Array: ...
+    def saturate(self, u: Array) -> Array:
+        """``u`` within the actuator limits (e.g. |tau| <= max_torque [N m])."""
+        ...
 
 
 @pytree_dataclass

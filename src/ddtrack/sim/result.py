@@ -22,6 +22,26 @@ class SimResult(NamedTuple):
     """Time series of a closed-loop run, one row per control period k (t_k = k T_c).
 
     Rows after a failure repeat the frozen last state; :attr:`n_valid` says how many rows count.
+    A batch (:func:`ddtrack.run_batch`) adds a leading run axis to every array.
+
+    Attributes
+    ----------
+    t : Array, shape (N,)
+        Sample times t_k [s].
+    state : Array, shape (N, 5)
+        The true state [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s].
+    reference : Reference
+        The reference at t_k, each field of shape (N,).
+    error : Array, shape (N, 3)
+        Posture error [e_x, e_y, e_theta] of the true state [m, m, rad] (SPEC 2.2).
+    control : Array, shape (N, 2)
+        Plant input held over [t_k, t_k+1): wheel torques [N m], or (v [m/s], omega [rad/s]).
+    logs : dict of str to Array
+        The controller's logged scalars, each (N,).
+    status : Array
+        0 ok, 1 diverged, 2 non_finite (:attr:`status_name`).
+    failure_index : Array
+        First failing row k, or -1.
     """
 
     t: Array  #: (N,) sample times [s]
@@ -35,6 +55,7 @@ class SimResult(NamedTuple):
 
     @property
     def status_name(self) -> str:
+        """``"ok"``, ``"diverged"`` or ``"non_finite"``."""
         return STATUS_NAMES[int(self.status)]
 
     @property
@@ -45,6 +66,7 @@ class SimResult(NamedTuple):
 
     @property
     def failure_time(self) -> float | None:
+        """When the run failed [s], or None for a run that did not."""
         k = int(self.failure_index)
         return None if k < 0 else float(self.t[k])
 
@@ -55,6 +77,17 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
     v_cmd, omega_cmd, tau_r, tau_l`` and every logged scalar (``kx, ky, ktheta``, ``saturated``, ...).
     Torques are NaN for a velocity-input plant.
+
+    Parameters
+    ----------
+    result : SimResult
+        A single run (not a batch).
+
+    Returns
+    -------
+    dict of str to ndarray
+        The columns of ``timeseries.parquet``, each of shape (n_valid,), in SI units: [s], [m], [rad],
+        [m/s], [rad/s], [N m].
     """
     n = result.n_valid
     rows = slice(0, n)

@@ -19,7 +19,14 @@ SCAN_UNROLL = 4
 
 
 class Draws(NamedTuple):
-    """The run's randomness, drawn before it from one seed (so the run itself is deterministic)."""
+    """The run's randomness, drawn before it from one seed (so the run itself is deterministic).
+
+    Attributes
+    ----------
+    disturbance : (N, 2) standard-normal draws for the Gaussian wheel-torque disturbance, one per period
+    noise : (N, 5) standard-normal draws for the measurement noise, one per period
+    controller_key : the PRNG key handed to ``controller.init`` (e.g. an MPPI sampler, dither)
+    """
 
     disturbance: Array  #: (N, 2) standard-normal draws for the Gaussian disturbance, one per period
     noise: Array  #: (N, 5) standard-normal draws for the measurement noise
@@ -107,6 +114,14 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
     n_steps : number of control periods N (static)
     control_period : T_c [s]
     substeps : RK4 steps per control period (static)
+    disturbance, noise : the wheel-torque disturbance and the pose-measurement noise
+    divergence_error, divergence_speed : thresholds of the ``diverged`` status [m], [m/s or rad/s]
+
+    Returns
+    -------
+    SimResult
+        the recorded series (states, references, errors, controls, logs; N rows each), the status and the
+        index of the failing period (-1 when none)
     """
     x0 = jnp.asarray(x0, dtype=float)
     memory0 = controller.init(x0, trajectory(0.0), draws.controller_key)

@@ -44,6 +44,8 @@ from ..base import Logs
 
 
 class MPPIMemory(NamedTuple):
+    """What MPPI carries from one control period to the next: its plan and its sampling key."""
+
     sequence: Array  #: (H, 2) planned wheel torques [N m], element i held over [i dt, (i + 1) dt)
     key: Array  #: PRNG key of the sampling noise, split every control period
 
