@@ -1,0 +1,89 @@
+"""Every script in examples/ runs (as a user would run it, in a fresh interpreter) and prints what it promises.
+
+A script may name its arguments for the test in a comment ``# test-args: ...`` (a shorter run). Each one
+needs an entry in CHECKS, so a new example cannot go untested.
+"""
+from __future__ import annotations
+
+import ast
+import re
+import shlex
+import subprocess
+import sys
+
+import pytest
+
+from conftest import ROOT
+
+EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
+NUMBER = r"([-+]?\d+(?:\.\d*)?)"
+
+
+def number(pattern: str, text: str) -> list[float]:
+    """The numbers captured by ``pattern`` (NUMBER groups) in ``text``; fails when it does not match."""
+    found = re.search(pattern, text)
+    assert found, f"{pattern!r} not in the output:\n{text}"
+    return [float(group) for group in found.groups()]
+
+
+def check_custom_controller(out: str) -> None:
+    (baseline,) = number(rf"backstepping\s+status ok, e_tr_mean {NUMBER} m", out)
+    (integral,) = number(rf"integral_kanayama\s+status ok, e_tr_mean {NUMBER} m", out)
+    assert baseline == pytest.approx(0.046, abs=0.001)  # the paper's line case (README, SPEC 4.5)
+    assert integral < baseline / 5  # the integral removes the friction-induced lag
+
+
+def check_custom_trajectory(out: str) -> None:
+    # at the crossing the lemniscate's speed is a w / sqrt(2), w = 2 pi / 60 s, a = 3 m; its yaw rate is 0
+    speed, omega = number(rf"speed {NUMBER} m/s, yaw rate {NUMBER} rad/s", out)
+    assert speed == pytest.approx(3 * 2 * 3.141592653589793 / 60 / 2**0.5, abs=5e-4) and omega == 0.0
+    (error,) = number(rf"status ok, e_tr_mean {NUMBER} m", out)
+    assert 0.0 < error < 0.1
+
+
+def check_monte_carlo(out: str) -> None:
+    mean, low, high = number(rf"6 of 6 runs ok; e_tr_mean {NUMBER} m, 95 % CI \[{NUMBER}, {NUMBER}\] m", out)
+    assert low < mean < high and 0.03 < mean < 0.06
+    (light,) = number(rf"low friction\s+\d+\s+{NUMBER}", out)
+    (heavy,) = number(rf"high friction\s+\d+\s+{NUMBER}", out)
+    assert light < heavy  # more unmodelled friction, more lag
+
+
+def check_load_parquet(out: str) -> None:
+    rows, end = number(rf"{NUMBER} rows x \d+ columns, t = 0 \.\. {NUMBER} s", out)
+    assert rows == 4000 and end == pytest.approx(39.99)  # 40 s at T_c = 10 ms
+    right, left, mean = number(rf"peak \|torque\|: right {NUMBER} N m, left {NUMBER} N m; e_tr_mean {NUMBER} m", out)
+    assert 0 < right <= 10.0 and 0 < left <= 10.0  # the actuator limit, max_torque
+    assert mean == pytest.approx(0.046, abs=0.001)
+
+
+def check_random_agent(out: str) -> None:
+    steps, seconds, final = number(rf"{NUMBER} steps \({NUMBER} s\), status ok, final e_tr {NUMBER} m", out)
+    assert steps == 200 and seconds == pytest.approx(2.0) and 0.0 <= final < 50.0
+
+
+CHECKS = {
+    "custom_controller.py": check_custom_controller,
+    "custom_trajectory.py": check_custom_trajectory,
+    "monte_carlo.py": check_monte_carlo,
+    "load_parquet.py": check_load_parquet,
+    "random_agent.py": check_random_agent,
+}
+
+
+def test_every_example_is_documented_and_checked():
+    assert len(EXAMPLES) >= 4
+    for path in EXAMPLES:
+        assert ast.get_docstring(ast.parse(path.read_text())), f"{path.name} has no module docstring"
+        assert path.name in CHECKS, f"examples/{path.name} has no check: add one to CHECKS in tests/test_examples.py"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_example_runs(path, tmp_path):
+    args = re.search(r"^# test-args:(.*)$", path.read_text(), flags=re.M)
+    command = [sys.executable, str(path), *(shlex.split(args.group(1)) if args else [])]
+    done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, f"{' '.join(command)} exited {done.returncode}:\n{done.stderr[-3000:]}"
+    CHECKS[path.name](done.stdout)
+    assert list(tmp_path.iterdir()) == []  # an example leaves nothing behind in the working folder
