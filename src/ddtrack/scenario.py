@@ -7,6 +7,7 @@ and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left 
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import math
 import tomllib
@@ -48,6 +49,10 @@ from .trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyl
 Positive = Annotated[float, Field(gt=0.0)]
 NonNegative = Annotated[float, Field(ge=0.0)]
 Pair = tuple[float, float]
+MAX_COORDINATE = 1e6  # [m]: 1000 km; far larger positions and lengths break the plots (ticks of 1e308 m)
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Position = tuple[Coordinate, Coordinate]
+Length = Annotated[float, Field(gt=0.0, le=MAX_COORDINATE)]
 
 
 class FieldError(ValueError):
@@ -59,6 +64,8 @@ class FieldError(ValueError):
 
 
 MAX_CONTROL_PERIODS = 2_000_000  # about 0.5 GB of recorded series; longer runs belong in chunks
+MAX_SEED = 2**63 - 1  # jax.random.PRNGKey takes an int64
+MAX_INPUT_BYTES = 64 * 2**20  # a scenario, sweep or waypoints file larger than this is a mistake
 
 
 class _Section(BaseModel):
@@ -76,7 +83,7 @@ class SimulationConfig(_Section):
     substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
     metric_window: Pair | None = Field(None, description="[start, end] of the error statistics [s]; "
                                                          "default the whole run.")
-    seed: int = Field(0, ge=0, description="Seed of every random draw of the run.")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Seed of every random draw of the run.")
     settling_threshold: Positive = Field(0.1, description="e_tr below which the run counts as settled [m].")
     divergence_error: Positive = Field(50.0, description="Tracking error at which a run is declared diverged [m].")
 
@@ -252,7 +259,7 @@ class LineTrajectory(_Section):
 
     kind: Literal["line"]
     speed: Positive = Field(0.5, description="v_r [m/s].")
-    start: Pair = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
     heading: float = Field(0.0, description="Direction [rad].")
 
     def build(self) -> Trajectory:
@@ -263,8 +270,8 @@ class SquareTrajectory(_Section):
     """The paper's square, counter-clockwise from ``corner`` with heading 0 (SPEC 4.3)."""
 
     kind: Literal["square"]
-    corner: Pair = Field((10.0, 0.0), description="Starting corner C0 [m].")
-    side: Positive = Field(10.0, description="Side S [m].")
+    corner: Position = Field((10.0, 0.0), description="Starting corner C0 [m].")
+    side: Length = Field(10.0, description="Side S [m].")
     speed: Positive = Field(0.5, description="v_r [m/s].")
     corner_radius: NonNegative = Field(0.0, description="Fillet radius at C1..C3 [m]; 0 = sharp corners.")
 
@@ -273,6 +280,10 @@ class SquareTrajectory(_Section):
         if 2.0 * self.corner_radius > self.side:
             raise FieldError("corner_radius", f"{self.corner_radius:g} m does not fit on a side of {self.side:g} m; "
                              "use at most side / 2")
+        try:
+            self.build()
+        except ValueError as exc:  # a side too small for distinct corners (5e-324 m)
+            raise FieldError("side", f"{self.side:g} m is too small for distinct corners ({exc})") from None
         return self
 
     def build(self) -> Trajectory:
@@ -283,8 +294,8 @@ class CircleTrajectory(_Section):
     """Circle at constant speed."""
 
     kind: Literal["circle"]
-    center: Pair = Field((0.0, 0.0), description="Centre [m].")
-    radius: Positive = Field(2.0, description="Radius [m].")
+    center: Position = Field((0.0, 0.0), description="Centre [m].")
+    radius: Length = Field(2.0, description="Radius [m].")
     speed: Positive = Field(0.5, description="v_r [m/s].")
     start_angle: float = Field(-math.pi / 2, description="Polar angle of the start point about the centre [rad].")
     clockwise: bool = Field(False, description="Direction of travel.")
@@ -298,8 +309,8 @@ class FigureEightTrajectory(_Section):
     """Lemniscate of Gerono (speed between 0.66*size*w and 1.41*size*w, w = 2 pi / period: it never stops)."""
 
     kind: Literal["figure_eight"]
-    center: Pair = Field((0.0, 0.0), description="Crossing point [m].")
-    size: Positive = Field(3.0, description="Half-width [m].")
+    center: Position = Field((0.0, 0.0), description="Crossing point [m].")
+    size: Length = Field(3.0, description="Half-width [m].")
     period: Positive = Field(60.0, description="Time for both lobes [s].")
 
     def build(self) -> Trajectory:
@@ -310,11 +321,11 @@ class SinusoidTrajectory(_Section):
     """A sine wave about a straight axis run at constant speed."""
 
     kind: Literal["sinusoid"]
-    start: Pair = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
     heading: float = Field(0.0, description="Direction of the axis [rad].")
     speed: Positive = Field(0.5, description="Speed along the axis [m/s].")
-    amplitude: NonNegative = Field(1.0, description="Lateral amplitude [m].")
-    wavelength: Positive = Field(10.0, description="Wavelength along the axis [m].")
+    amplitude: Annotated[float, Field(ge=0.0, le=MAX_COORDINATE)] = Field(1.0, description="Lateral amplitude [m].")
+    wavelength: Length = Field(10.0, description="Wavelength along the axis [m].")
 
     def build(self) -> Trajectory:
         return Sinusoid(start=self.start, heading=self.heading, speed=self.speed, amplitude=self.amplitude,
@@ -324,13 +335,14 @@ class SinusoidTrajectory(_Section):
 class WaypointsTrajectory(_Section):
     """A polyline through waypoints at constant speed with rounded corners.
 
-    ``file`` is a CSV of x,y rows (an optional header line), relative to the scenario file; the
-    resolved scenario holds the points inline instead.
+    ``file`` is a CSV of x,y rows (an optional header line), relative to the scenario file and inside its
+    folder tree (an absolute path, or a ``..`` or symlink leading out, is an error); the resolved scenario
+    holds the points inline instead.
     """
 
     kind: Literal["waypoints"]
     file: str | None = Field(None, description="CSV file of x,y rows, relative to the scenario file.")
-    points: list[Pair] | None = Field(None, description="Inline [[x, y], ...] instead of a file [m].")
+    points: list[Position] | None = Field(None, description="Inline [[x, y], ...] instead of a file [m].")
     speed: Positive = Field(0.5, description="v_r [m/s].")
     corner_radius: NonNegative = Field(0.0, description="Fillet radius at interior waypoints [m].")
     loop: bool = Field(False, description="Repeat the path; otherwise the reference stops at the end.")
@@ -343,7 +355,7 @@ class WaypointsTrajectory(_Section):
                 return data  # the type error is reported by the field
             base = Path((info.context or {}).get("base_dir", "."))
             try:
-                data = {**data, "points": read_waypoints(base / data["file"]), "file": None}
+                data = {**data, "points": read_waypoints(_contained(base, data["file"])), "file": None}
             except ValueError as exc:
                 raise FieldError("file", str(exc)) from None
         if isinstance(data, dict) and isinstance(data.get("points"), list):  # TOML arrays -> [x, y] tuples
@@ -373,10 +385,23 @@ TrajectoryConfig = Annotated[
 ]
 
 
+def _contained(base: Path, name: str) -> Path:
+    """``base / name``, refused (ValueError) unless it stays inside ``base``'s folder tree once ``..`` and symlinks
+    are resolved: a scenario, perhaps from someone else, can make ddtrack read only files beside it or below it."""
+    if Path(name).is_absolute():
+        raise ValueError(f"'{name}' is an absolute path; a waypoints file is read relative to the scenario file, "
+                         "inside its folder: copy the CSV beside the scenario and give its file name")
+    path = base / name
+    if not path.resolve().is_relative_to(base.resolve()):
+        raise ValueError(f"'{name}' leads outside the scenario's folder ('..' or a symlink); copy the CSV beside "
+                         "the scenario and give its file name")
+    return path
+
+
 def read_waypoints(path: Path) -> list[Pair]:
     """Read x,y rows from a CSV file (one optional header line)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_input(path).decode("utf-8")
     except FileNotFoundError:
         raise ValueError(f"waypoints file '{path}' does not exist") from None
     except UnicodeDecodeError:
@@ -405,7 +430,7 @@ def read_waypoints(path: Path) -> list[Pair]:
 class InitialConfig(_Section):
     """The robot's state at t = 0."""
 
-    pose: tuple[float, float, float] | None = Field(None, description="[x, y, theta] of the axle midpoint; "
+    pose: tuple[Coordinate, Coordinate, float] | None = Field(None, description="[x, y, theta] of the axle midpoint; "
                                                                       "default the reference pose at t = 0.")
     velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
 
@@ -861,11 +886,23 @@ def switch_controller(data: dict[str, Any], kind: str) -> None:
     section["kind"] = kind
 
 
+def read_input(path: Path) -> bytes:
+    """The bytes of a regular file of at most ``MAX_INPUT_BYTES``; :class:`OSError` for anything else (a
+    device such as /dev/zero or a pipe would never end, or fill the memory)."""
+    if path.exists() and not path.is_file() and not path.is_dir():
+        raise OSError(errno.EINVAL, "not a regular file")
+    with path.open("rb") as f:
+        data = f.read(MAX_INPUT_BYTES + 1)
+    if len(data) > MAX_INPUT_BYTES:
+        raise OSError(errno.EFBIG, f"larger than {MAX_INPUT_BYTES // 2**20} MiB")
+    return data
+
+
 def read_toml(path: Path, what: str, reference: str) -> dict[str, Any]:
     """Read a TOML file; every problem (missing, a folder, not UTF-8, unreadable, not TOML) is a
     :class:`ConfigError` saying which ``what`` file and pointing to the ``reference`` document."""
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_input(path).decode("utf-8")
     except FileNotFoundError:
         raise ConfigError("", f"{what} file '{path}' does not exist", "check the path") from None
     except IsADirectoryError:

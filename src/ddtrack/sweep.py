@@ -118,7 +118,9 @@ _MODELS: dict[str, type[BaseModel]] = {"": SweepFile, "seeds": SeedRange, "rando
 def _sweep_error(exc: ValidationError) -> ConfigError:
     """pydantic's first error as a one-line ConfigError naming the sweep file's field."""
     errors = exc.errors()
-    error = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
+    # an unknown key first; else the most specific error (seeds = {count = "x"} fails both the int and the
+    # SeedRange member of the union: name seeds.count, not seeds)
+    error = next((e for e in errors if e["type"] == "extra_forbidden"), max(errors, key=lambda e: len(e["loc"])))
     loc = [str(part) for part in error["loc"] if part not in ("int", "SeedRange")]
     cause = error.get("ctx", {}).get("error")
     if isinstance(cause, FieldError):
@@ -431,8 +433,10 @@ def local_cluster(workers: int) -> Any:
 
     from distributed import LocalCluster
 
+    # the scheduler serves its HTTP endpoints whatever the dashboard setting (None still takes :8787, and warns when
+    # another cluster holds it): a free port on loopback instead
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                        dashboard_address=None, silence_logs=logging.ERROR)
+                        dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
 
 
 __all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep",
