@@ -32,7 +32,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Polygon  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from .errors import ConfigError  # noqa: E402
+from .errors import ConfigError, RunError  # noqa: E402
 from .plotting import ADAPTIVE, REFERENCE, ROBOT  # noqa: E402
 from .scenario import Scenario, load_scenario  # noqa: E402
 
@@ -530,8 +530,10 @@ def _write_atomically(path: Path, render: Callable[[Path], None]) -> None:
         os.umask(mask)
         os.chmod(tmp, 0o666 & ~mask)  # mkstemp's 0600 would hide the file from the user's group
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):  # a full disk: one line naming the file, no partial file (as atomic_write)
+            raise RunError(f"cannot write '{path}' ({exc.strerror or exc}); nothing partial was left") from exc
         raise
 
 

@@ -30,9 +30,17 @@ def _umask() -> int:
 
 
 def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` through ``write(file)`` on a temporary sibling, then rename it into place."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    """Write ``path`` through ``write(file)`` on a temporary sibling, then rename it into place.
+
+    A write that fails midway (a full disk, a folder that went read-only) removes its temporary and
+    raises :class:`RunError` naming ``path`` and the cause (``No space left on device``): the folder
+    keeps only the files that were whole before, and the command line prints one line, exit code 2.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise RunError(f"cannot write '{path}' ({exc.strerror or exc})") from exc
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from the user's group
         with os.fdopen(fd, "wb") as file:
@@ -40,8 +48,11 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
             file.flush()
             os.fsync(file.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise RunError(f"cannot write '{path}' ({exc.strerror or exc}); "
+                           "nothing partial was left: free some space or choose another --out") from exc
         raise
 
 
