@@ -5,6 +5,7 @@ User mistakes print one or two plain lines on stderr, never a traceback.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -37,7 +38,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     from .scenario import load_scenario
 
     spec = load_scenario(scenario, overrides=overrides, seed=seed, controller=controller)
-    folder = out if out is not None else Path("runs") / spec.name
+    folder = out if out is not None else Path("runs") / folder_name(spec.name)
     from .rundir import check_writable
 
     check_writable(folder)  # before spending time on the simulation
@@ -75,6 +76,14 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
                f"effort {'none (no torques)' if effort is None else f'{effort:.1f} N^2 m^2 s'}; "
                f"saturated {100 * metrics['saturation_fraction']:.1f} % of the time")
     return 0
+
+
+def folder_name(name: str) -> str:
+    """``name`` as one safe folder name for the default ``runs/NAME``: every character other than a letter, a digit,
+    ``.``, ``_`` or ``-`` becomes ``_`` and leading dots go, so a scenario named ``../../etc`` or ``a/b`` cannot
+    make ``ddtrack run`` write outside ``runs/``."""
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", name).lstrip(".")
+    return safe or "run"
 
 
 @cli.command()
@@ -157,6 +166,11 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
         raise ConfigError("--controllers", f"'{controllers}' must name distinct controllers, comma-separated",
                           "e.g. --controllers backstepping,nn_adaptive_backstepping")
     from .mc import format_summary, load_specs, run_specs, summarise, write
+    from .scenario import MAX_SEED
+
+    if seed + n - 1 > MAX_SEED:
+        raise ConfigError("--seed", f"seeds {seed} .. {seed + n - 1} pass the largest seed, {MAX_SEED}",
+                          "choose a smaller --seed")
 
     specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
     check_writable(out)
@@ -168,6 +182,10 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
     write(out, rows, summary)
     click.echo(format_summary(summary, n))
     click.echo(f"wrote {out}/runs.parquet, runs.csv, summary.json")
+    failed = sum(row["status"] != "ok" for runs in rows.values() for row in runs)
+    if failed:  # exit 1, as for `run` and `sweep`: the results are written, with the failures among them
+        click.echo(f"{failed} of {n * len(names)} runs diverged or went non-finite (status column of runs.csv)", err=True)
+        return 1
     return 0
 
 

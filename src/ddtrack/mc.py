@@ -90,7 +90,12 @@ def format_summary(summary: dict, n: int) -> str:
     lines = [f"{n} runs per controller; mean [95 % CI]"]
     for name, stats in summary["controllers"].items():
         e = stats["e_tr_mean"]
-        text = "all runs failed" if e["mean"] is None else f"{e['mean']:.4f} [{e['ci_low']:.4f}, {e['ci_high']:.4f}] m"
+        if e["mean"] is None:
+            text = "all runs failed"
+        elif e["ci_low"] is None:
+            text = f"{e['mean']:.4f} m (one run: no interval)"
+        else:
+            text = f"{e['mean']:.4f} [{e['ci_low']:.4f}, {e['ci_high']:.4f}] m"
         lines.append(f"  {name:<26} e_tr_mean {text}; failures {stats['failures']}")
     for name, gain in summary["improvement"].items():
         if gain["mean"] is None:
