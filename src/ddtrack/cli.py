@@ -240,15 +240,25 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     return 0
 
 
+def cluster_options(command: Callable) -> Callable:
+    """The options that choose where ``sweep`` and ``bench`` run: ``--scheduler``, ``--scheduler-file``, ``--workers``."""
+    options = [
+        click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tls://10.0.0.5:8786."),
+        click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
+                     help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file)."),
+        click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
+                     help="Worker processes of the embedded local cluster [default: CPU count]."),
+    ]
+    for option in reversed(options):  # decorators apply bottom-up: keep the options in this order in --help
+        command = option(command)
+    return command
+
+
 @cli.command()
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
-@click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tls://10.0.0.5:8786.")
-@click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
-              help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file).")
-@click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
-              help="Worker processes of the embedded local cluster [default: CPU count].")
+@cluster_options
 def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> int:
     """Run a parameter sweep (SWEEP.toml, see docs/sweeps.md) on Dask, resumably.
 
@@ -277,11 +287,7 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
 @click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/bench"), show_default=True,
               help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.")
-@click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler.")
-@click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
-              help="Use the running Dask scheduler described by FILE.")
-@click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
-              help="Worker processes of the embedded local cluster [default: CPU count].")
+@cluster_options
 def bench(suite_name: str, controllers: str | None, out: Path, scheduler: str | None, scheduler_file: Path | None,
           workers: int | None) -> int:
     """Rank controllers over trajectories, uncertainty levels and seeds on common random numbers, with a
