@@ -45,7 +45,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,19 +53,11 @@ TOLERANCE = 1e-8  # max |python - ddtrack| over every recorded state component
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from control_loop import timings  # noqa: E402  (python-control itself is imported only when measured)
+
 
 class Disagreement(RuntimeError):
     """The Python loop and ddtrack do not simulate the same thing: no timing comparison is honest."""
-
-
-def timings(fn: Callable[[], object], repeats: int) -> list[float]:
-    """Wall times [s] of ``repeats`` calls of ``fn`` (which must wait for its own result)."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return times
 
 
 def machine_info() -> dict[str, object]:

@@ -435,15 +435,35 @@ class InitialConfig(_Section):
     velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
 
 
-class BacksteppingConfig(_Section):
-    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+class _InnerLoopConfig(_Section):
+    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (DESIGN 3): computed torque
+    (eq. 11) or wheel-space PD (SPEC 2.6), so every velocity-level controller meets the same dynamics layer."""
 
-    kind: Literal["backstepping"]
-    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+    kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
     inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
     kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
     kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
+
+    def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
+        """The inner loop on the ``nominal`` model, sampled every ``control_period`` [s]."""
+        if self.inner == "computed_torque":
+            return ComputedTorque(nominal, kc=self.kc)
+        return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
+
+    def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
+        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (SPEC 2.5, 2.6)."""
+        if self.inner == "computed_torque":
+            return self.kc
+        r2 = nominal.wheel_radius**2
+        return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
+
+
+class BacksteppingConfig(_InnerLoopConfig):
+    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+
+    kind: Literal["backstepping"]
+    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
     strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
@@ -461,17 +481,6 @@ class BacksteppingConfig(_Section):
                              max_yaw_rate=self.max_yaw_rate, strict=self.strict)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
-    def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
-        if self.inner == "computed_torque":
-            return ComputedTorque(nominal, kc=self.kc)
-        return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
-
-    def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
-        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (SPEC 2.5, 2.6)."""
-        if self.inner == "computed_torque":
-            return self.kc
-        r2 = nominal.wheel_radius**2
-        return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
 
 
 PositiveTriple = tuple[Positive, Positive, Positive]
@@ -548,7 +557,7 @@ class NNAdaptiveConfig(BacksteppingConfig):
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
-class LTVLQRConfig(_Section):
+class LTVLQRConfig(_InnerLoopConfig):
     """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
 
     kind: Literal["ltv_lqr"]
@@ -560,10 +569,6 @@ class LTVLQRConfig(_Section):
         "|v_r| below this is linearised at this speed, where e_y stays controllable [m/s]."))
     dare_iterations: int = Field(32, ge=1, le=64, description=(
         "Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."))
-    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
-    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
-    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
-    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
@@ -581,7 +586,7 @@ class LTVLQRConfig(_Section):
                                max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
                                dare_iterations=self.dare_iterations)
         # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
-        return Cascade(outer, BacksteppingConfig.build_inner(self, nominal, control_period))  # type: ignore[arg-type]
+        return Cascade(outer, self.build_inner(nominal, control_period))
 
 
 class SlidingModeConfig(_Section):
@@ -622,7 +627,7 @@ class KinematicBacksteppingConfig(_Section):
                             max_yaw_rate=self.max_yaw_rate)
 
 
-class RegulatedPurePursuitConfig(_Section):
+class RegulatedPurePursuitConfig(_InnerLoopConfig):
     """Regulated pure pursuit (Macenski et al. 2023, Nav2) keeping pace with the reference, over an inner loop."""
 
     kind: Literal["regulated_pure_pursuit"]
@@ -646,10 +651,6 @@ class RegulatedPurePursuitConfig(_Section):
     search_horizon: Positive = Field(5.0, description=(
         "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."))
     search_samples: int = Field(50, ge=2, le=1000, description="Segments of that search (linear between samples).")
-    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
-    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
-    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
-    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
     max_velocity: Positive = Field(2.0, description="Clamp on v_c [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c|, by slowing down on the same arc [rad/s].")
 
@@ -673,7 +674,7 @@ class RegulatedPurePursuitConfig(_Section):
             search_horizon=self.search_horizon, search_samples=self.search_samples,
             rotate_to_heading=self.rotate_to_heading)
         # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
-        return Cascade(outer, BacksteppingConfig.build_inner(self, nominal, control_period))  # type: ignore[arg-type]
+        return Cascade(outer, self.build_inner(nominal, control_period))
 
 
 class AdaptiveBacksteppingConfig(_Section):
