@@ -23,6 +23,21 @@ def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
     return np.stack(columns, axis=-1)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def no_persistent_cache_in_this_process():
+    """In-process CLI calls leave JAX's persistent compilation cache off. It is process-global: once on, every later
+    test would write its executables too, and after some 400 tests' compilations jaxlib 0.10 aborted or crashed
+    while (de)serialising one (the tune gradient). A ``ddtrack`` process compiles a few programs and exits; the
+    tests that start ``ddtrack`` as a subprocess (test_readme, test_nothing_lost, ...) still use the cache."""
+    import ddtrack.cli
+    import ddtrack.sweep
+
+    with pytest.MonkeyPatch.context() as patch:
+        for module in (ddtrack.cli, ddtrack.sweep):
+            patch.setattr(module, "enable_compilation_cache", lambda: None)
+        yield
+
+
 @pytest.fixture
 def cli(capsys):
     """Run ``ddtrack ARGS`` in-process; return (exit code, stdout, stderr)."""

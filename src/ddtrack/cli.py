@@ -57,7 +57,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     identification = None
     if setup.identification is not None:
         found = setup.identification
-        identification = {"samples": found.samples, "epochs": int(found.epoch_loss.shape[0]),
+        identification = {"samples": int(found.samples), "epochs": int(found.epoch_loss.shape[0]),
                           "epoch_loss": [float(v) for v in found.epoch_loss],
                           "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True))}
     write_run(folder, spec, columns, metrics, identification)

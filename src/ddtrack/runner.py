@@ -21,7 +21,7 @@ from .identification import Identification, identify
 from .metrics import summarize
 from .model import RobotParams
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
-from .sim import STATUS_NAMES, Draws, SimResult, simulate, simulate_batch, stack
+from .sim import STATUS_NAMES, Draws, SimResult, simulate_batch, stack, vmap_runs
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
 
@@ -124,8 +124,9 @@ def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
     (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
     outer = setup.controller.outer
-    result = result if result is not None else _identifier(scenario)(
-        setup.plant_params, setup.controller.inner, outer.emulator, key, setup.disturbance, setup.noise)
+    if result is None:  # as a batch of one, so that its bits equal its row in any batch's identification
+        result = row(vmap_runs(_identifier(scenario))(*stack([(setup.plant_params, setup.controller.inner,
+                                                               outer.emulator, key, setup.disturbance, setup.noise)])), 0)
     controller = dataclasses.replace(setup.controller, outer=dataclasses.replace(outer, emulator=result.emulator))
     return dataclasses.replace(setup, controller=controller, identification=result)
 
@@ -147,10 +148,11 @@ def _identifier(scenario: Scenario):
 def shard_runs(tree):
     """Spread a batch (every leaf's leading axis is the run) over the available devices, so that each device
     (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up) simulates its share;
-    unchanged on one device or when the runs do not split evenly."""
+    unchanged on one device, when the runs do not split evenly, or when a device would get a single run (compiled
+    as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``)."""
     devices = jax.devices()
     runs = len(jax.tree_util.tree_leaves(tree)[0])
-    if len(devices) == 1 or runs % len(devices):
+    if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
         return tree
     mesh = jax.sharding.Mesh(np.asarray(devices), ("runs",))
     return jax.device_put(tree, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("runs")))
@@ -165,7 +167,7 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
-        identify_all = jax.vmap(_identifier(scenario), in_axes=(0, 0, 0, 0, 0, 0))
+        identify_all = vmap_runs(_identifier(scenario))
         found = identify_all(*shard_runs((setup.plant_params, setup.controller.inner, setup.controller.outer.emulator,
                                           keys, setup.disturbance, setup.noise)))
         setup = with_identification(scenario, setup, keys, found)
@@ -215,12 +217,11 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
-    plant = setup.plant  # the true robot, or the unicycle for a kinematic controller
-    if batched:
-        return simulate_batch(plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance,
-                              setup.noise, **_steps(scenario))
-    return simulate(plant, setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws,
-                    disturbance=setup.disturbance, noise=setup.noise, **_steps(scenario))
+    runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+    if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller
+        return simulate_batch(*runs, **_steps(scenario))
+    # a lone run is simulated as a batch of one, so that its bits equal its row in any batch
+    return row(simulate_batch(*stack([runs]), **_steps(scenario)), 0)
 
 
 def _steps(scenario: Scenario) -> dict:
@@ -237,7 +238,7 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
-    series = {"e_tr": jnp.hypot(result.error[..., 0], result.error[..., 1])}
+    series = {"e_xy": result.error[..., :2]}  # e_tr = np.hypot on the host, as ddtrack.timeseries computes it
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
     return series, result.status, result.failure_index
 
@@ -248,6 +249,8 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     runs = shard_runs((setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
                        setup.disturbance, setup.noise))
     series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **_steps(scenario)))
+    e_xy = series.pop("e_xy")
+    series["e_tr"] = np.hypot(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     metrics = []

@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from ..._ordered import matmul, total
 from ..._pytree import pytree_dataclass, static_field
 from ...geometry import wrap_angle
 from ...model import RobotParams, body_acceleration
@@ -86,14 +87,15 @@ class MPPICost:
     max_yaw_rate: float = 4.0
 
     def __call__(self, states: Array, torques: Array, reference: Array) -> Array:
-        position = jnp.sum((states[:, 0:2] - reference[:, 0:2]) ** 2, axis=1)
+        squared_norm = lambda pairs: pairs[:, 0] ** 2 + pairs[:, 1] ** 2  # noqa: E731
+        position = squared_norm(states[:, 0:2] - reference[:, 0:2])
         heading = wrap_angle(reference[:, 2] - states[:, 2]) ** 2
-        velocity = jnp.sum((states[:, 3:5] - reference[:, 3:5]) ** 2, axis=1)
+        velocity = squared_norm(states[:, 3:5] - reference[:, 3:5])
         tracking = self.position * position + self.heading * heading
         excess = jax.nn.relu(jnp.abs(states[:, 3:5]) - jnp.stack([self.max_velocity, self.max_yaw_rate]))
-        stage = (tracking + self.velocity * velocity + self.effort * jnp.sum(torques**2, axis=1)
-                 + self.limit * jnp.sum(excess**2, axis=1))
-        return jnp.sum(stage) + self.terminal * tracking[-1]
+        stage = (tracking + self.velocity * velocity + self.effort * squared_norm(torques)
+                 + self.limit * squared_norm(excess))
+        return total(stage) + self.terminal * tracking[-1]  # sums in a fixed order (ddtrack._ordered)
 
 
 @pytree_dataclass
@@ -133,8 +135,10 @@ class MPPI:
         clipped = jnp.mean(jnp.any(jnp.abs(unclipped[:, 0]) > limit, axis=-1))
         reference = preview(self.trajectory, t, self.horizon, self.model_step)
         costs = jax.vmap(lambda u: self.cost(rollout(self.nominal, y, u, self.model_step), u, reference))(candidates)
-        weights = jax.nn.softmax(-(costs - jnp.min(costs)) / self.temperature)
-        return jnp.tensordot(weights, candidates, axes=1), costs, clipped
+        weights = jnp.exp(-(costs - jnp.min(costs)) / self.temperature)
+        weights = weights / total(weights)
+        plan = matmul(weights, candidates.reshape(self.samples, -1)).reshape(self.horizon, 2)
+        return plan, costs, clipped
 
     def sequence_cost(self, t: Array, y: Array, sequence: Array) -> Array:
         """The cost S of one torque sequence (H, 2) from state ``y`` at time ``t``."""
