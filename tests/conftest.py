@@ -23,6 +23,16 @@ def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
     return np.stack(columns, axis=-1)
 
 
+@pytest.fixture(scope="module", autouse=True)
+def fresh_compilations_per_module():
+    """Drop every compiled program after each test module. One process compiles well over a thousand XLA
+    executables over the suite; held to the end, XLA's CPU compiler crashed (segfault, abort) late in the run."""
+    yield
+    import jax
+
+    jax.clear_caches()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def no_persistent_cache_in_this_process():
     """In-process CLI calls leave JAX's persistent compilation cache off. It is process-global: once on, every later
