@@ -14,7 +14,8 @@ In one process, in this order:
    ddtrack draws from the seed, which the Python loop takes from ``ddtrack.prepare``).
 3. ``single_bs_s``: median wall time of ``ddtrack.run(scenario)`` (randomness drawn from the seed,
    then the jitted ``lax.scan``), waited for with ``jax.block_until_ready``; ``simulate_only_s``
-   is ``ddtrack.simulate`` alone on the prepared arguments.
+   is the unbatched ``ddtrack.simulate`` alone on the prepared arguments (``ddtrack.run`` simulates the run
+   as a batch's row, docs/benchmarks.md).
 4. ``python_loop_bs_s``: median wall time of the same run by the Python loop;
    ``ratio_python_over_ddtrack`` = python_loop_bs_s / single_bs_s (the target is >= 10).
 5. ``single_nn_s``: median wall time of one NN-adaptive run (identification apart, timed as
@@ -257,7 +258,7 @@ def measure_cli(repeats: int) -> dict[str, object]:
 ROWS = [
     ("compile_s", "compile (first ddtrack.run minus steady)"),
     ("single_bs_s", "ddtrack.run, one line-case run"),
-    ("simulate_only_s", "  of which ddtrack.simulate"),
+    ("simulate_only_s", "  unbatched ddtrack.simulate"),
     ("single_nn_s", "NN-adaptive run (identification apart)"),
     ("nn_identification_s", "NN identification phase"),
     ("python_loop_bs_s", "plain Python loop, same run"),

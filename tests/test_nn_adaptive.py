@@ -92,7 +92,7 @@ def body_basis(theta) -> jnp.ndarray:
 # --- item 14: Lambda = 0 is backstepping --------------------------------------------------------------
 
 
-def simulate_alone(scenario, setup, draws):
+def simulate_unbatched(scenario, setup, draws):
     """One run through the unbatched simulator, ``ddtrack.sim.simulate`` (``ddtrack.run`` uses the batch program)."""
     sim = scenario.simulation
     return ddtrack.timeseries(simulate(setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
@@ -103,16 +103,16 @@ def simulate_alone(scenario, setup, draws):
 
 @pytest.mark.parametrize("identification", [False, True], ids=["untrained", "identified"])
 def test_zero_rates_reproduce_backstepping_bit_for_bit(line, identification):
-    """The law itself, on the unbatched simulator. Through ``ddtrack.run`` (the batch program, tests/test_determinism.py)
+    """The law itself, on the unbatched simulator. Through ``ddtrack.run`` (a batch's row, tests/test_determinism.py)
     the two laws' programs are fused differently and LLVM contracts different multiply-adds into FMAs: there they
     agree to ~4e-14 (measured), which the second check bounds."""
     overrides = ["controller.rates=[0, 0, 0]", f"controller.identification={str(identification).lower()}"]
     scenario = ddtrack.load_scenario(LINE, overrides=[NN, *overrides])
     setup, draws = prepare(scenario, identification=line["identification"] if identification else None)
     assert (setup.identification is not None) == identification
-    nn = simulate_alone(scenario, setup, draws)
+    nn = simulate_unbatched(scenario, setup, draws)
     backstepping = ddtrack.load_scenario(LINE)
-    bs = simulate_alone(backstepping, *prepare(backstepping))
+    bs = simulate_unbatched(backstepping, *prepare(backstepping))
     for name in SHARED:
         assert np.array_equal(nn[name], bs[name]), name
     batched = run_line(*overrides, identification=line["identification"] if identification else None)[0]

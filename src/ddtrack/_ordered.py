@@ -1,9 +1,9 @@
-"""Small matrix products and sums written as a fixed sequence of elementwise operations.
+"""Sums written as a fixed tree of elementwise additions.
 
-XLA compiles ``a @ b`` and ``jnp.sum`` to dot and reduce kernels whose order of summation depends on the
-operands' shapes, batch axis included: the emulator identified in a batch of 64 runs rounded differently
-from the same run's in a batch of 2. Spelled out term by term, a sum leaves XLA nothing to reorder, so a
-run and its row in any batch give the same bits (docs/reliability.md, tests/test_determinism.py).
+XLA compiles ``jnp.sum`` to a reduce kernel whose order of summation depends on the operand's shape, batch
+axis included: the emulator identified in a batch of 64 runs rounded differently from the same run's in a
+batch of 2, through its gradient norm. Added pairwise by explicit slices, a sum leaves XLA nothing to reorder,
+so a run and its row in any batch give the same bits (docs/reliability.md, tests/test_determinism.py).
 """
 from __future__ import annotations
 
@@ -11,22 +11,12 @@ import jax.numpy as jnp
 from jax import Array
 
 
-def matmul(a: Array, b: Array) -> Array:
-    """``a @ b`` for a matrix or vector ``a`` and ``b``, summed over k = 0, 1, ... in that order."""
-    a2 = a if a.ndim == 2 else a[None, :]
-    b2 = b if b.ndim == 2 else b[:, None]
-    out = a2[:, 0:1] * b2[0:1, :]
-    for k in range(1, a2.shape[1]):
-        out = out + a2[:, k:k + 1] * b2[k:k + 1, :]
-    if a.ndim == 1:
-        out = out[0]
-    return out[..., 0] if b.ndim == 1 else out
-
-
 def total(x: Array) -> Array:
-    """The sum of every element of ``x``, added in row-major order."""
-    flat = jnp.ravel(x)
-    out = flat[0]
-    for k in range(1, flat.shape[0]):
-        out = out + flat[k]
-    return out
+    """The sum of every element of ``x`` (row-major): halves added elementwise, level by level, an odd last term
+    carried up; log2(size) dependent additions."""
+    terms = jnp.ravel(x)
+    while terms.shape[0] > 1:
+        half = terms.shape[0] // 2
+        paired = terms[:half] + terms[half:2 * half]
+        terms = paired if terms.shape[0] % 2 == 0 else jnp.concatenate([paired, terms[2 * half:]])
+    return terms[0]

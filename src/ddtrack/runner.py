@@ -18,10 +18,10 @@ import numpy as np
 from jax import Array
 
 from .identification import Identification, identify
-from .metrics import summarize
+from .metrics import summarize, tracking_error
 from .model import RobotParams
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
-from .sim import STATUS_NAMES, Draws, SimResult, simulate_batch, stack, vmap_runs
+from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, vmap_runs
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
 
@@ -125,8 +125,8 @@ def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
     (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
     outer = setup.controller.outer
     if result is None:  # as a batch of one, so that its bits equal its row in any batch's identification
-        result = row(vmap_runs(_identifier(scenario))(*stack([(setup.plant_params, setup.controller.inner,
-                                                               outer.emulator, key, setup.disturbance, setup.noise)])), 0)
+        inputs = (setup.plant_params, setup.controller.inner, outer.emulator, key, setup.disturbance, setup.noise)
+        result = row(vmap_runs(_identifier(scenario))(*stack([inputs])), 0)
     controller = dataclasses.replace(setup.controller, outer=dataclasses.replace(outer, emulator=result.emulator))
     return dataclasses.replace(setup, controller=controller, identification=result)
 
@@ -220,8 +220,7 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller
         return simulate_batch(*runs, **_steps(scenario))
-    # a lone run is simulated as a batch of one, so that its bits equal its row in any batch
-    return row(simulate_batch(*stack([runs]), **_steps(scenario)), 0)
+    return simulate_alone(*runs, **_steps(scenario))  # as a batch's row, bit for bit
 
 
 def _steps(scenario: Scenario) -> dict:
@@ -238,7 +237,7 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
-    series = {"e_xy": result.error[..., :2]}  # e_tr = np.hypot on the host, as ddtrack.timeseries computes it
+    series = {"e_xy": result.error[..., :2]}  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
     return series, result.status, result.failure_index
 
@@ -250,7 +249,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
                        setup.disturbance, setup.noise))
     series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **_steps(scenario)))
     e_xy = series.pop("e_xy")
-    series["e_tr"] = np.hypot(e_xy[..., 0], e_xy[..., 1])
+    series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     metrics = []

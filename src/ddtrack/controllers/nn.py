@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from .._ordered import matmul, total
+from .._ordered import total
 from .._pytree import pytree_dataclass
 
 
@@ -46,8 +46,8 @@ def init_mlp(key: Array, n_in: int, n_hidden: int, n_out: int) -> MLP:
 
 def forward(mlp: MLP, z_normalised: Array) -> tuple[Array, Array]:
     """Normalised output y~ and hidden activations h (paper eqs. 19-20 with a linear output, eq. 32)."""
-    h = jnp.tanh(matmul(mlp.w1, z_normalised) + mlp.b1)
-    return matmul(mlp.w2, h) + mlp.b2, h
+    h = jnp.tanh(mlp.w1 @ z_normalised + mlp.b1)
+    return mlp.w2 @ h + mlp.b2, h
 
 
 def predict(mlp: MLP, scales: Scales, z: Array) -> Array:
@@ -58,7 +58,7 @@ def predict(mlp: MLP, scales: Scales, z: Array) -> Array:
 def input_jacobian(mlp: MLP, scales: Scales, z: Array) -> Array:
     """dy/dz = diag(s_y) W2 diag(1 - h^2) W1 diag(1/s_z) (paper eq. 34 corrected, SPEC 3.7), (n_out, n_in)."""
     _, h = forward(mlp, z / scales.inputs)
-    return matmul(scales.outputs[:, None] * mlp.w2, (1.0 - h**2)[:, None] * mlp.w1) / scales.inputs[None, :]
+    return (scales.outputs[:, None] * mlp.w2) @ ((1.0 - h**2)[:, None] * mlp.w1) / scales.inputs[None, :]
 
 
 def sample_loss(mlp: MLP, z_normalised: Array, target_normalised: Array) -> Array:
@@ -71,7 +71,7 @@ def backprop(mlp: MLP, z_normalised: Array, target_normalised: Array) -> MLP:
     """Gradient of :func:`sample_loss` by the closed form of SPEC 3.7 (delta_2 = y~ - y~*, ...)."""
     y, h = forward(mlp, z_normalised)
     delta2 = y - target_normalised
-    delta1 = matmul(mlp.w2.T, delta2) * (1.0 - h**2)
+    delta1 = (mlp.w2.T @ delta2) * (1.0 - h**2)
     return MLP(w1=jnp.outer(delta1, z_normalised), b1=delta1, w2=jnp.outer(delta2, h), b2=delta2)
 
 

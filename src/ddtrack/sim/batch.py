@@ -44,3 +44,16 @@ def simulate_batch(plant: Any, controller: Any, trajectory: Any, x0: Any, draws:
                         substeps=substeps, disturbance=disturbance, noise=noise, divergence_error=divergence_error)
 
     return vmap_runs(one)(plant, controller, trajectory, x0, draws, disturbance, noise)
+
+
+@partial(jax.jit, static_argnames=("n_steps", "substeps"))
+def simulate_alone(plant: Any, controller: Any, trajectory: Any, x0: Any, draws: Any, disturbance: Any, noise: Any,
+                   *, n_steps: int, control_period: float, substeps: int, divergence_error: float) -> SimResult:
+    """One run (arguments without a batch axis) as row 0 of :func:`simulate_batch`, so that its bits equal its row
+    in any batch; adding and removing the batch axis happen inside this one compiled program (no per-leaf dispatch).
+    """
+    runs = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], (plant, controller, trajectory, x0, draws,
+                                                                         disturbance, noise))
+    batch = simulate_batch(*runs, n_steps=n_steps, control_period=control_period, substeps=substeps,
+                           divergence_error=divergence_error)
+    return jax.tree_util.tree_map(lambda leaf: leaf[0], batch)

@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from ..._ordered import matmul, total
+from ..._ordered import total
 from ..._pytree import pytree_dataclass, static_field
 from ...geometry import wrap_angle
 from ...model import RobotParams, body_acceleration
@@ -87,6 +87,7 @@ class MPPICost:
     max_yaw_rate: float = 4.0
 
     def __call__(self, states: Array, torques: Array, reference: Array) -> Array:
+        # written out, not jnp.sum: XLA rounded that reduce differently by batch size (ddtrack._ordered)
         squared_norm = lambda pairs: pairs[:, 0] ** 2 + pairs[:, 1] ** 2  # noqa: E731
         position = squared_norm(states[:, 0:2] - reference[:, 0:2])
         heading = wrap_angle(reference[:, 2] - states[:, 2]) ** 2
@@ -95,7 +96,7 @@ class MPPICost:
         excess = jax.nn.relu(jnp.abs(states[:, 3:5]) - jnp.stack([self.max_velocity, self.max_yaw_rate]))
         stage = (tracking + self.velocity * velocity + self.effort * squared_norm(torques)
                  + self.limit * squared_norm(excess))
-        return total(stage) + self.terminal * tracking[-1]  # sums in a fixed order (ddtrack._ordered)
+        return total(stage) + self.terminal * tracking[-1]
 
 
 @pytree_dataclass
@@ -136,9 +137,8 @@ class MPPI:
         reference = preview(self.trajectory, t, self.horizon, self.model_step)
         costs = jax.vmap(lambda u: self.cost(rollout(self.nominal, y, u, self.model_step), u, reference))(candidates)
         weights = jnp.exp(-(costs - jnp.min(costs)) / self.temperature)
-        weights = weights / total(weights)
-        plan = matmul(weights, candidates.reshape(self.samples, -1)).reshape(self.horizon, 2)
-        return plan, costs, clipped
+        weights = weights / total(weights)  # softmax, its sum in a fixed order
+        return jnp.tensordot(weights, candidates, axes=1), costs, clipped
 
     def sequence_cost(self, t: Array, y: Array, sequence: Array) -> Array:
         """The cost S of one torque sequence (H, 2) from state ``y`` at time ``t``."""
