@@ -30,21 +30,41 @@ class Identification(NamedTuple):
     samples: int
 
 
-def exciting_reference(duration: float, control_period: float) -> SampledTrajectory:
-    """v_r = 0.5 + 0.3 sin 0.3t + 0.1 sin(1.3t + 1), omega_r = 0.4 sin 0.5t + 0.3 sin 1.7t (SPEC 3.7):
-    speeds in [0.1, 0.9] m/s and yaw rates in [-0.7, 0.7] rad/s."""
+#: Peak speed [m/s] and yaw rate [rad/s] of the unscaled exciting reference.
+REFERENCE_PEAKS = (0.9, 0.7)
+#: Fraction of the command clamps the scaled reference may reach (room for the feedback and the dither).
+CLAMP_MARGIN = 0.8
+
+
+def identification_scale(max_velocity: float, max_yaw_rate: float,
+                         peaks: tuple[float, float] | None = None) -> tuple[float, float]:
+    """(k_v, k_omega): how much to shrink the exciting reference, the dither and the emulator's scales so that
+    the identification stays inside the clamps. Data taken against a clamp says nothing about the command's
+    effect, so a robot slower than the paper's would otherwise learn nothing. ``peaks`` overrides the peak
+    (speed, yaw rate); by default min(0.9, 0.8 v_max) and min(0.7, 0.8 omega_max), i.e. 1 for the paper's robot."""
+    if peaks is None:
+        peaks = (min(REFERENCE_PEAKS[0], CLAMP_MARGIN * max_velocity), min(REFERENCE_PEAKS[1], CLAMP_MARGIN * max_yaw_rate))
+    return peaks[0] / REFERENCE_PEAKS[0], peaks[1] / REFERENCE_PEAKS[1]
+
+
+def exciting_reference(duration: float, control_period: float, scale: tuple[float, float] = (1.0, 1.0)
+                       ) -> SampledTrajectory:
+    """v_r = k_v (0.5 + 0.3 sin 0.3t + 0.1 sin(1.3t + 1)), omega_r = k_omega (0.4 sin 0.5t + 0.3 sin 1.7t)
+    (SPEC 3.7 at k = 1): speeds in k_v [0.1, 0.9] m/s and yaw rates in k_omega [-0.7, 0.7] rad/s."""
+    k_v, k_w = scale
     return unicycle_reference(
-        lambda t: 0.5 + 0.3 * jnp.sin(0.3 * t) + 0.1 * jnp.sin(1.3 * t + 1.0),
-        lambda t: 0.4 * jnp.sin(0.5 * t) + 0.3 * jnp.sin(1.7 * t),
+        lambda t: k_v * (0.5 + 0.3 * jnp.sin(0.3 * t) + 0.1 * jnp.sin(1.3 * t + 1.0)),
+        lambda t: k_w * (0.4 * jnp.sin(0.5 * t) + 0.3 * jnp.sin(1.7 * t)),
         duration=duration, step=control_period,
     )
 
 
 def collect(plant: RobotParams, inner: object, emulator: Emulator, key: Array, *, duration: float,
             control_period: float, substeps: int, dither: Array, gains: Array, limits: Array,
-            disturbance: WheelDisturbance, noise: MeasurementNoise) -> tuple[Array, Array]:
+            disturbance: WheelDisturbance, noise: MeasurementNoise, reference_scale: tuple[float, float] = (1.0, 1.0)
+            ) -> tuple[Array, Array]:
     """Run the identification experiment; return inputs z (n, n_in) and targets (n, 3) [physical units]."""
-    trajectory = exciting_reference(duration, control_period)
+    trajectory = exciting_reference(duration, control_period, reference_scale)
     outer = Dithered(Backstepping(kx=gains[0], ky=gains[1], ktheta=gains[2], max_velocity=limits[0],
                                   max_yaw_rate=limits[1]), std=dither)
     n = round(duration / control_period)
@@ -91,12 +111,15 @@ def identify(plant: RobotParams, inner: object, emulator: Emulator, key: Array, 
              epochs: int = 100, control_period: float = 0.01, substeps: int = 10, dither: Array = (0.05, 0.1),
              gains: Array = (1.0, 55.0, 15.0), limits: Array = (2.0, 4.0), learning_rate: float = 0.2,
              momentum: float = 0.3, clip_norm: float = 5.0, disturbance: WheelDisturbance = WheelDisturbance(),
-             noise: MeasurementNoise = MeasurementNoise()) -> Identification:
-    """Collect identification data on ``plant`` and train ``emulator`` on it (SPEC 3.7 schedule, step 1)."""
+             noise: MeasurementNoise = MeasurementNoise(), reference_scale: tuple[float, float] = (1.0, 1.0)
+             ) -> Identification:
+    """Collect identification data on ``plant`` and train ``emulator`` on it (SPEC 3.7 schedule, step 1);
+    ``reference_scale`` is :func:`identification_scale`'s (k_v, k_omega)."""
     k_data, k_train = jax.random.split(key)
     z, targets = collect(plant, inner, emulator, k_data, duration=duration, control_period=control_period,
                          substeps=substeps, dither=jnp.asarray(dither, float), gains=jnp.asarray(gains, float),
-                         limits=jnp.asarray(limits, float), disturbance=disturbance, noise=noise)
+                         limits=jnp.asarray(limits, float), disturbance=disturbance, noise=noise,
+                         reference_scale=reference_scale)
     trained, losses = _train_jit(emulator, z, targets, k_train, epochs=epochs, learning_rate=learning_rate,
                                  momentum=momentum, clip_norm=clip_norm)
     return Identification(trained, losses, prediction_nmse(trained, z, targets), int(z.shape[0]))

@@ -137,10 +137,11 @@ def _identifier(scenario: Scenario):
 
     def run_identification(plant, inner, emulator, key, disturbance, noise):
         return identify(plant, inner, emulator, key, duration=config.identification_duration, epochs=config.epochs,
-                        control_period=sim.control_period, substeps=sim.substeps, dither=config.dither,
+                        control_period=sim.control_period, substeps=sim.substeps, dither=config.identification_dither(),
                         gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate),
                         learning_rate=config.learning_rate, momentum=config.momentum,
-                        clip_norm=config.gradient_clip, disturbance=disturbance, noise=noise)
+                        clip_norm=config.gradient_clip, disturbance=disturbance, noise=noise,
+                        reference_scale=config.identification_scale())
 
     return run_identification
 

@@ -42,6 +42,7 @@ from .controllers.baselines import (
     SlidingModeTorque,
 )
 from .errors import ConfigError, did_you_mean
+from .identification import identification_scale
 from .model import DynamicPlant, KinematicPlant, MeasurementNoise, RobotParams, WheelDisturbance
 from .sim import NominalPeriod
 from .trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square
@@ -518,8 +519,12 @@ class NNAdaptiveConfig(BacksteppingConfig):
     identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
     identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
     epochs: int = Field(100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data.")
-    dither: tuple[NonNegative, NonNegative] = Field((0.05, 0.1), description=(
-        "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run."))
+    identification_speed: tuple[Positive, Positive] | None = Field(None, description=(
+        "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
+        "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."))
+    dither: tuple[NonNegative, NonNegative] | None = Field(None, description=(
+        "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
+        "(0.05, 0.1) scaled like the identification reference."))
     freeze_time: NonNegative | None = Field(None, description=(
         "No gain change before this time [s]; default 0 with identification, 2 without."))
 
@@ -529,6 +534,15 @@ class NNAdaptiveConfig(BacksteppingConfig):
             if not low <= gain <= high:
                 raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
         return self
+
+    def identification_scale(self) -> tuple[float, float]:
+        """(k_v, k_omega) of the identification reference, dither and emulator scales; (1, 1) for the paper's robot."""
+        return identification_scale(self.max_velocity, self.max_yaw_rate, self.identification_speed)
+
+    def identification_dither(self) -> tuple[float, float]:
+        """The dither's (sigma_v, sigma_omega): given, or the paper's (0.05, 0.1) scaled like the reference."""
+        k_v, k_w = self.identification_scale()
+        return self.dither if self.dither is not None else (0.05 * k_v, 0.1 * k_w)
 
     def _nominal_period(self, nominal: RobotParams, control_period: float) -> NominalPeriod | None:
         """One period of the nominal model under the inner loop, RK4 steps of at most 1 ms (the "model" Jacobians)."""
@@ -540,8 +554,10 @@ class NNAdaptiveConfig(BacksteppingConfig):
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller with a freshly initialised emulator (its identification is done by the runner)."""
         uses_velocity = self.emulator == "E1"
+        k_v, k_w = self.identification_scale()  # the emulator's range is the identification's
         emulator = Emulator(init_mlp(key, 4 if uses_velocity else 2, self.hidden_units, 3),
-                            emulator_scales(control_period, uses_velocity=uses_velocity), uses_velocity)
+                            emulator_scales(control_period, uses_velocity=uses_velocity, max_velocity=k_v * 1.0,
+                                            max_yaw_rate=k_w * 2.0), uses_velocity)
         bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
         freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
         outer = NNAdaptiveBackstepping(
