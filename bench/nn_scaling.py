@@ -69,7 +69,7 @@ def main() -> None:
     enable_compilation_cache()
     seeds = list(range(args.seeds))
     print(f"{args.seeds} seeds; e_tr = mean tracking error over the metric window [20, 60] s; improvement = "
-          "mean over seeds of 1 - e_NN / e_BS (worst seed)\n")
+          "mean over seeds of 100 (1 - e_NN / e_BS) %, worst seed in brackets\n")
     print("| robot | rate | backstepping e_tr [m] | NN-adaptive e_tr [m] | improvement (worst seed) | worst NMSE |")
     print("|---|---|---|---|---|---|")
     for robot in args.robots.split(","):
