@@ -13,7 +13,7 @@ import ddtrack
 from ddtrack.adaptation import adaptation_warnings
 from ddtrack.controllers import emulator_scales
 from ddtrack.identification import identification_scale, identify
-from ddtrack.runner import prepare, run_setup
+from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
 from ddtrack.sim import stack, vmap_runs
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -57,20 +57,35 @@ def test_paper_robot_identification_is_bit_identical():
 
 
 @pytest.mark.slow
-def test_burger_at_20_hz_identifies_and_adapts():
+@pytest.mark.parametrize("rate", [10, 20])
+def test_burger_identifies_and_adapts(rate):
     """The Burger's clamps (0.22 m/s) lie far below the unscaled identification reference (0.1-0.9 m/s): its data
-    was all saturated and the emulator failed (NMSE > 1). Scaled, each output predicts within NMSE 0.2 (measured
-    ~1e-3), and the adapted gains beat backstepping (measured 0.0064 m against 0.0141 m)."""
-    spec = ddtrack.load_scenario(BURGER)
-    setup, draws = prepare(spec)
+    was all saturated, the emulator failed (worst-output NMSE 3.6 to 98 before the fix) and the NN-adaptive controller did no
+    better than backstepping (20 Hz) or worse (10 Hz). Scaled, each output predicts within NMSE 0.2 (measured below
+    0.01) and every seed beats backstepping by a clear margin (measured 52 % to 55 %; before: -226 % to +5 %)."""
+    overrides = [f"simulation.control_period={1 / rate!r}", f"simulation.substeps={1000 // rate}",
+                 'randomize.mass={distribution="uniform", relative=0.2}']  # a different true mass per seed
+    seeds = [0, 1]
+    errors = {}
+    for kind in ("backstepping", NN):
+        spec = ddtrack.load_scenario(BURGER, overrides=overrides, controller=kind)
+        setup, draws = prepare_batch(spec, seeds)
+        errors[kind] = np.array([m["e_tr_mean"] for m in batch_metrics(spec, setup, draws)])
     nmse = np.asarray(setup.identification.nmse)
     assert np.all(nmse < 0.2), nmse
-    nn = ddtrack.timeseries(run_setup(spec, setup, draws))
-    bs = ddtrack.timeseries(ddtrack.run(ddtrack.load_scenario(BURGER, controller="backstepping")))
-    window = (nn["t"] >= 20.0 - 1e-9)
-    # a clear margin: the improvement is ~55 %; 20 % is far above seed-to-seed noise of a deterministic plant
-    assert np.mean(nn["e_tr"][window]) < 0.8 * np.mean(bs["e_tr"][window])
-    assert adaptation_warnings(spec.controller, nn, nmse) == []
+    # 20 % is a clear margin: far outside the spread over seeds of the working method (52 % to 55 %)
+    assert np.all(errors[NN] < 0.8 * errors["backstepping"]), errors
+
+
+@pytest.mark.slow
+def test_burger_run_has_no_adaptation_warning():
+    """The shipped scenario, shortened: identified and adapting, so no warning."""
+    spec = ddtrack.load_scenario(BURGER, overrides=["simulation.duration=5.0", "simulation.metric_window=[0, 5]",
+                                                    "controller.identification_duration=20.0", "controller.epochs=30"])
+    setup, draws = prepare(spec)
+    nmse = np.asarray(setup.identification.nmse)
+    columns = ddtrack.timeseries(run_setup(spec, setup, draws))
+    assert adaptation_warnings(spec.controller, columns, nmse) == [], nmse
 
 
 def _columns(n: int = 100, gate_open: float = 1.0, gain_change: float = 0.1) -> dict:
