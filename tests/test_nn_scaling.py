@@ -60,9 +60,10 @@ def test_paper_robot_identification_is_bit_identical():
 @pytest.mark.parametrize("rate", [10, 20])
 def test_burger_identifies_and_adapts(rate):
     """The Burger's clamps (0.22 m/s) lie far below the unscaled identification reference (0.1-0.9 m/s): its data
-    was all saturated, the emulator failed (worst-output NMSE 3.6 to 98 before the fix) and the NN-adaptive controller did no
-    better than backstepping (20 Hz) or worse (10 Hz). Scaled, each output predicts within NMSE 0.2 (measured below
-    0.01) and every seed beats backstepping by a clear margin (measured 52 % to 55 %; before: -226 % to +5 %)."""
+    was all saturated, the emulator failed (worst-output NMSE 3.6 to 98 before the fix) and the NN-adaptive
+    controller did no better than backstepping (20 Hz) or worse (10 Hz). Scaled, each output predicts within
+    NMSE 0.2 (measured below 0.01) and every seed beats backstepping by a clear margin (measured 52 % to 55 %;
+    before: -226 % to +5 %)."""
     overrides = [f"simulation.control_period={1 / rate!r}", f"simulation.substeps={1000 // rate}",
                  'randomize.mass={distribution="uniform", relative=0.2}']  # a different true mass per seed
     seeds = [0, 1]

@@ -43,7 +43,8 @@ def identification_scale(max_velocity: float, max_yaw_rate: float,
     effect, so a robot slower than the paper's would otherwise learn nothing. ``peaks`` overrides the peak
     (speed, yaw rate); by default min(0.9, 0.8 v_max) and min(0.7, 0.8 omega_max), i.e. 1 for the paper's robot."""
     if peaks is None:
-        peaks = (min(REFERENCE_PEAKS[0], CLAMP_MARGIN * max_velocity), min(REFERENCE_PEAKS[1], CLAMP_MARGIN * max_yaw_rate))
+        peaks = (min(REFERENCE_PEAKS[0], CLAMP_MARGIN * max_velocity),
+                 min(REFERENCE_PEAKS[1], CLAMP_MARGIN * max_yaw_rate))
     return peaks[0] / REFERENCE_PEAKS[0], peaks[1] / REFERENCE_PEAKS[1]
 
 
