@@ -33,6 +33,11 @@ def test_identification_scale_keeps_the_reference_inside_the_clamps():
     assert identification_scale(0.22, 2.84, (0.45, 0.35)) == pytest.approx((0.5, 0.5))  # the override
 
 
+def test_identification_speed_beyond_the_clamps_is_refused():
+    with pytest.raises(ddtrack.ConfigError, match="identification_speed"):
+        ddtrack.load_scenario(BURGER, overrides=["controller.identification_speed=[0.9, 0.7]"])
+
+
 def test_paper_robot_identification_is_bit_identical():
     """With the paper's clamps (k = 1) the runner identifies exactly as SPEC 3.7's unscaled schedule does."""
     short = ["controller.identification_duration=2.0", "controller.epochs=3"]

@@ -533,6 +533,12 @@ class NNAdaptiveConfig(BacksteppingConfig):
         for name, low, gain, high in zip(("Kx", "Ky", "Ktheta"), self.gain_min, self.gains, self.gain_max, strict=True):
             if not low <= gain <= high:
                 raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
+        if self.identification_speed is not None:  # identification data taken against a clamp teaches nothing
+            (v, w), (v_max, w_max) = self.identification_speed, (self.max_velocity, self.max_yaw_rate)
+            if v > v_max or w > w_max:
+                raise FieldError("identification_speed", f"[{v:g}, {w:g}] exceeds the clamps max_velocity = "
+                                 f"{v_max:g} m/s, max_yaw_rate = {w_max:g} rad/s; keep each below about 80 % "
+                                 "of its clamp")
         return self
 
     def identification_scale(self) -> tuple[float, float]:
