@@ -53,8 +53,8 @@ def adaptation_warnings(controller: Any, columns: Mapping[str, Sequence[float]],
         values = ", ".join(f"{name} {value:.3g}" for name, value in zip(_OUTPUTS, nmse, strict=True))
         found.append({"code": "identification_failed", "message": (
             f"the emulator's identification failed (NMSE {values}; above {MAX_NMSE:g} is unusable), so the gains "
-            "follow a wrong Jacobian; keep controller.identification_speed inside the clamps or set "
-            "controller.jacobian = \"model\"")})
+            "follow a wrong Jacobian; lengthen controller.identification_duration, keep identification_speed well "
+            "inside the clamps, or set controller.jacobian = \"model\"")})
     if "gate" in columns and len(columns["gate"]) and np.mean(columns["gate"]) < MIN_GATE_OPEN:
         found.append({"code": "adaptation_gated", "message": (
             f"the gains could adapt only {100 * np.mean(columns['gate']):.3g} % of the time (the gate closes when "
