@@ -76,7 +76,9 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
 
     ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
     v_cmd, omega_cmd, tau_r, tau_l`` and every logged scalar (``kx, ky, ktheta``, ``saturated``, ...).
-    Torques are NaN for a velocity-input plant.
+    Torques are NaN for a velocity-input plant. ``theta`` and ``theta_ref`` are both continuous
+    (unwrapped, so plots show no 2 pi jumps): ``theta_ref = theta + e_theta``, where ``e_theta`` is the
+    posture error wrapped to (-pi, pi], so ``theta_ref - theta`` is the true heading error.
 
     Parameters
     ----------
@@ -100,7 +102,8 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     columns = {
         "t": np.asarray(result.t, dtype=float)[rows],
         "x": state[:, 0], "y": state[:, 1], "theta": state[:, 2], "v": state[:, 3], "omega": state[:, 4],
-        "x_ref": ref["x"], "y_ref": ref["y"], "theta_ref": ref["theta"], "v_ref": ref["v"], "omega_ref": ref["omega"],
+        "x_ref": ref["x"], "y_ref": ref["y"], "v_ref": ref["v"], "omega_ref": ref["omega"],
+        "theta_ref": state[:, 2] + error[:, 2],  # continuous like theta; the reference's own is wrapped
         "e_x": error[:, 0], "e_y": error[:, 1], "e_theta": error[:, 2], "e_tr": np.hypot(error[:, 0], error[:, 1]),
         "v_cmd": logs.pop("v_cmd", control[:, 0]), "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
         "tau_r": logs.pop("tau_r", nan), "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
