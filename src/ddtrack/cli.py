@@ -12,10 +12,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import click
-import jax
 
+from ._after_import import after_import
 from .errors import ConfigError, RunError
-from .runner import enable_compilation_cache
 
 LISTS = ("controllers", "trajectories", "disturbances")
 
@@ -438,9 +437,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     return code if isinstance(code, int) else 0
 
 
-def entry_point() -> None:
-    """Console-script entry point. The ``ddtrack`` process gives JAX one CPU device per core, so that ``mc``
-    batches split over the cores (``runner.shard_runs``); in-process callers of :func:`main` keep their own."""
+def enable_compilation_cache() -> None:
+    """JAX's persistent compilation cache, imported only by the commands that simulate."""
+    from .runner import enable_compilation_cache as enable
+
+    enable()
+
+
+def one_device_per_core(jax) -> None:
+    """One JAX CPU device per usable core (called once JAX is imported)."""
     jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                       else os.cpu_count() or 1)
+
+
+def entry_point() -> None:
+    """Console-script entry point. The ``ddtrack`` process gives JAX one CPU device per core, so that ``mc``
+    batches split over the cores (``runner.shard_runs``); in-process callers of :func:`main` keep their own.
+    JAX is imported only when a command needs it, so ``--help`` starts fast."""
+    after_import("jax", one_device_per_core)
     sys.exit(main())
