@@ -455,4 +455,21 @@ def entry_point() -> None:
     batches split over the cores (``runner.shard_runs``); in-process callers of :func:`main` keep their own.
     JAX is imported only when a command needs it, so ``--help`` starts fast."""
     after_import("jax", one_device_per_core)
-    sys.exit(main())
+    code = main()
+    if "distributed" not in sys.modules:  # Dask's exit hooks stop worker processes: let those run
+        exit_now(code)
+    sys.exit(code)
+
+
+def exit_now(code: int) -> None:
+    """Exit without the interpreter's teardown (0.3 s of JAX and Matplotlib clean-up that keeps nothing): every
+    file is written, fsynced and closed by then; the standard streams and the log are flushed here."""
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: nothing more can reach it
+            pass
+    os._exit(code)
