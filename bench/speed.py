@@ -289,14 +289,15 @@ ROWS = [
     ("warm_cli_s", "`ddtrack run`, populated cache"),
     ("ratio_cold", "cold `ddtrack run` / python process (<= 6)"),
     ("ratio_warm", "warm `ddtrack run` / python process (<= 3)"),
-    ("phase_import_s", "warm run: import (click, scenario, JAX)"),
+    ("phase_total_s", "warm run in process (bench/cli_phases.py)"),
+    ("phase_import_s", "  import (click, scenario, JAX)"),
     ("phase_load_s", "  load and validate the scenario"),
-    ("phase_jax_s", "  start JAX's backend, the cache"),
-    ("phase_prepare_s", "  prepare (draws: one program)"),
+    ("phase_jax_s", "  switch on the compilation cache"),
+    ("phase_prepare_s", "  prepare (backend start, draws)"),
     ("phase_simulate_s", "  simulate (trace, cache hit, run)"),
     ("phase_metrics_s", "  metrics"),
-    ("phase_write_s", "  write toml, parquet, json"),
-    ("phase_figures_s", "  figures (PNG)"),
+    ("phase_write_s", "  write the folder (figures apart)"),
+    ("phase_figures_s", "  figures (four PNGs)"),
 ]
 
 
