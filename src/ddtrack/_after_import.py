@@ -27,6 +27,8 @@ class _AfterImport(importlib.abc.MetaPathFinder):
                 break
         else:
             return None
+        if not hasattr(spec.loader, "exec_module"):  # a namespace package or a legacy loader: leave it alone
+            return spec
         actions = self.waiting.pop(name)
         run_module = spec.loader.exec_module
 
