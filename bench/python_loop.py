@@ -38,9 +38,14 @@ Usage::
 """
 from __future__ import annotations
 
+import argparse
+import csv
 import math
+import sys
+import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 State = tuple[float, float, float, float, float]  # x [m], y [m], theta [rad], v [m/s], omega [rad/s]
@@ -516,3 +521,68 @@ def _loop_params(scenario: Any, controller: str, unsupported: list[str]) -> dict
         control_period=sim.control_period,
         substeps=sim.substeps,
     )
+
+
+# --- the whole process: a plain script of the case ------------------------------------------------
+
+
+def params_from_toml(path: str | Path) -> dict[str, Any]:
+    """:func:`params_from_scenario` for a backstepping line scenario read by ``tomllib`` alone (no ddtrack, no
+    NumPy), as a plain script would; its left-out plant keys take the [robot] values and friction defaults to 0."""
+    with open(path, "rb") as file:
+        doc = tomllib.load(file)
+    robot_keys = ("mass", "inertia", "com_offset", "wheel_radius", "half_axle")
+    defaults = {"viscous_friction": 0.0, "coulomb_friction": 0.0, "friction_smoothing": 0.01, "max_torque": 10.0}
+    nominal = {**defaults, **{k: float(v) for k, v in doc["robot"].items() if k in Robot.__dataclass_fields__}}
+    missing = [f"robot.{k}" for k in robot_keys if k not in nominal]
+    control, trajectory, disturbance = doc["controller"], doc["trajectory"], doc.get("disturbance", {"kind": "none"})
+    unsupported = [f"{name} = {value!r}" for name, value, wanted in (
+        ("controller.kind", control.get("kind"), "backstepping"), ("controller.inner", control.get("inner"),
+                                                                   "computed_torque"),
+        ("trajectory.kind", trajectory.get("kind"), "line"), ("disturbance.kind", disturbance.get("kind"), "sinusoid"),
+    ) if value != wanted] + [f"[{section}]" for section in ("noise", "randomize") if doc.get(section)]
+    missing += [f"controller.{k}" for k in ("gains", "kc", "max_velocity", "max_yaw_rate") if k not in control]
+    if missing or unsupported or doc.get("initial", {}).get("pose") is None:
+        raise ValueError(f"bench/python_loop.py reads only the paper's line case; missing {missing}, "
+                         f"unsupported {unsupported} (and initial.pose must be given)")
+    plant = {**nominal, **{k: float(v) for k, v in doc.get("plant", {}).items() if k in Robot.__dataclass_fields__}}
+    sim = doc["simulation"]
+    kx, ky, ktheta = map(float, control["gains"])
+    pair = lambda values: (float(values[0]), float(values[1]))  # noqa: E731
+    return dict(
+        plant=Robot(**plant), nominal=Robot(**nominal),
+        disturbance=Disturbance(bias=pair(disturbance.get("bias", (0, 0))), amplitude=pair(disturbance["amplitude"]),
+                                frequency=float(disturbance["frequency"]), phase=pair(disturbance.get("phase", (0, 0)))),
+        line=Line(start=pair(trajectory["start"]), heading=float(trajectory["heading"]), speed=float(trajectory["speed"])),
+        x0=(*map(float, doc["initial"]["pose"]), *map(float, doc["initial"].get("velocity", (0, 0)))),
+        gains=BacksteppingGains(kx=kx, ky=ky, ktheta=ktheta, kc=pair(control["kc"]),
+                                max_velocity=float(control["max_velocity"]), max_yaw_rate=float(control["max_yaw_rate"])),
+        n_steps=round(float(sim["duration"]) / float(sim["control_period"])),
+        control_period=float(sim["control_period"]), substeps=int(sim.get("substeps", 1)),
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python bench/python_loop.py [SCENARIO] [--out states.csv]``: the case as a whole plain-Python process
+    (read the TOML, simulate, write the states, print the final tracking error): bench/speed.py's baseline for
+    the ``ddtrack run`` command."""
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("scenario", nargs="?", default=Path(__file__).resolve().parent.parent / "scenarios"
+                        / "paper_line.toml")
+    parser.add_argument("--out", help="CSV file of the states: t, x, y, theta, v, omega")
+    args = parser.parse_args(argv)
+    params = params_from_toml(args.scenario)
+    states = run_backstepping(**params)
+    if args.out:
+        with open(args.out, "w", newline="") as file:
+            writer = csv.writer(file)
+            writer.writerow(("t", "x", "y", "theta", "v", "omega"))
+            writer.writerows((k * params["control_period"], *state) for k, state in enumerate(states))
+    t_end = (len(states) - 1) * params["control_period"]
+    x_r, y_r, *_ = line_reference(params["line"], t_end)
+    print(f"e_tr at t = {t_end:g} s: {math.hypot(states[-1][0] - x_r, states[-1][1] - y_r):.4f} m")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

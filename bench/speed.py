@@ -28,8 +28,12 @@ In one process, in this order:
    on one JAX CPU device per core, as the ``ddtrack`` command sets up.
 8. ``cold_cli_s`` / ``warm_cli_s``: wall time of a whole ``ddtrack run scenarios/paper_line.toml
    --out <tmp>`` subprocess (interpreter start, imports, compile, run, metrics, writing the run
-   folder) with DDTRACK_CACHE_DIR pointing at a fresh empty folder (cold), then at that folder once
-   populated (warm). Each cold repeat gets its own fresh folder.
+   folder and its figures) with DDTRACK_CACHE_DIR pointing at a fresh empty folder (cold), then at that
+   folder once populated (warm); each repeat gets its own fresh folder. ``python_process_s``: the whole
+   process ``python bench/python_loop.py scenarios/paper_line.toml --out <tmp>.csv`` (read the TOML,
+   simulate in plain Python, write the states), run just before each cold/warm pair so that the three share
+   the machine's load; ``ratio_cold`` / ``ratio_warm`` = cold_cli_s / warm_cli_s over python_process_s
+   (targets: <= 6 and <= 3). ``--cli-only`` measures only this.
 
 Medians resist the noise of a shared machine; the minimum of each series is reported beside it.
 """
@@ -227,30 +231,41 @@ def ddtrack_command() -> list[str]:
 
 
 def measure_cli(repeats: int) -> dict[str, object]:
+    """Whole processes, interleaved so that they share the machine's load: ``python bench/python_loop.py`` (the
+    case as a plain script) and ``ddtrack run`` cold (an empty compile cache) and warm (that cache populated)."""
     command = ddtrack_command()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
-    cold, warm, entries = [], [], []
+    cold, warm, plain, entries = [], [], [], []
     with tempfile.TemporaryDirectory(prefix="ddtrack-bench-") as scratch:
         scratch = Path(scratch)
 
-        def run_cli(cache: Path, out: Path) -> float:
+        def timed(args: list[str], cache: Path) -> float:
             start = time.perf_counter()
-            done = subprocess.run([*command, "run", str(SCENARIO), "--out", str(out)], cwd=ROOT,
-                                  env={**env, "DDTRACK_CACHE_DIR": str(cache)}, capture_output=True, text=True)
+            done = subprocess.run(args, cwd=ROOT, env={**env, "DDTRACK_CACHE_DIR": str(cache)}, capture_output=True,
+                                  text=True)
             elapsed = time.perf_counter() - start
             if done.returncode != 0:
-                raise RuntimeError(f"`ddtrack run` exited {done.returncode}:\n{done.stdout}{done.stderr}")
+                raise RuntimeError(f"`{' '.join(args)}` exited {done.returncode}:\n{done.stdout}{done.stderr}")
             return elapsed
 
+        plain_script = [sys.executable, str(ROOT / "bench" / "python_loop.py"), str(SCENARIO)]
         for i in range(repeats):
             cache = scratch / f"cache{i}"
             cache.mkdir()
-            cold.append(run_cli(cache, scratch / f"cold{i}"))
+            plain.append(timed([*plain_script, "--out", str(scratch / f"states{i}.csv")], cache))
+            cold.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"cold{i}")], cache))
             entries.append(sum(1 for p in cache.rglob("*") if p.is_file()))
-        for i in range(repeats):
-            warm.append(run_cli(scratch / "cache0", scratch / f"warm{i}"))
-    return {"cold_cli_s": statistics.median(cold), "cold_cli_min_s": min(cold), "warm_cli_s": statistics.median(warm),
-            "warm_cli_min_s": min(warm), "cli_repeats": repeats, "cli_cache_files": entries[0],
+            warm.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"warm{i}")], cache))
+        phases = json.loads(subprocess.run(
+            [sys.executable, str(ROOT / "bench" / "cli_phases.py"), str(SCENARIO), "--json", "--cache",
+             str(scratch / "cache0")], cwd=ROOT, env=env, capture_output=True, text=True, check=True).stdout)
+    python_s = statistics.median(plain)
+    return {"python_process_s": python_s, "python_process_min_s": min(plain),
+            "cold_cli_s": statistics.median(cold), "cold_cli_min_s": min(cold), "warm_cli_s": statistics.median(warm),
+            "warm_cli_min_s": min(warm), "ratio_cold": statistics.median(cold) / python_s,
+            "ratio_cold_min": min(cold) / min(plain), "ratio_warm": statistics.median(warm) / python_s,
+            "ratio_warm_min": min(warm) / min(plain), "cli_repeats": repeats, "cli_cache_files": entries[0],
+            **{f"phase_{name}": value for name, value in phases.items()},
             "cli_command": " ".join([Path(command[0]).name, *command[1:], "run", "scenarios/paper_line.toml",
                                      "--out", "<tmp>"])}
 
@@ -269,18 +284,32 @@ ROWS = [
     ("ratio_control_over_ddtrack", "speed-up python-control / ddtrack (>= 10)"),
     ("batch_bs_robot_steps_per_s", "batch backstepping (target 5 M)"),
     ("batch_nn_robot_steps_per_s", "batch NN-adaptive (target 1 M)"),
+    ("python_process_s", "`python bench/python_loop.py`, whole process"),
     ("cold_cli_s", "`ddtrack run`, empty compile cache"),
     ("warm_cli_s", "`ddtrack run`, populated cache"),
+    ("ratio_cold", "cold `ddtrack run` / python process (<= 6)"),
+    ("ratio_warm", "warm `ddtrack run` / python process (<= 3)"),
+    ("phase_total_s", "warm run in process (bench/cli_phases.py)"),
+    ("phase_import_s", "  import (click, scenario, JAX)"),
+    ("phase_load_s", "  load and validate the scenario"),
+    ("phase_jax_s", "  switch on the compilation cache"),
+    ("phase_prepare_s", "  prepare (backend start, draws)"),
+    ("phase_simulate_s", "  simulate (trace, cache hit, run)"),
+    ("phase_metrics_s", "  metrics"),
+    ("phase_write_s", "  write the folder (figures apart)"),
+    ("phase_figures_s", "  figures (four PNGs)"),
 ]
 
 
 def table(result: dict[str, object]) -> str:
-    lines = [f"ddtrack speed benchmark: {result['scenario']}, {result['n_steps']} control periods x "
-             f"{result['substeps']} RK4 substeps",
+    lines = [f"ddtrack speed benchmark: {SCENARIO.relative_to(ROOT)}",
              f"{result['cpu']} ({result['cores']} cores), python {result['python']}, jax {result['jax']}, "
-             f"numpy {result['numpy']}, {result['date']}",
-             f"states agree to {result['max_abs_state_difference']:.1e} (backstepping), "
-             f"{result['max_abs_state_difference_nn']:.1e} (NN-adaptive)", ""]
+             f"numpy {result['numpy']}, {result['date']}, load average {result['load_average_start']}"]
+    if "n_steps" in result:
+        lines += [f"{result['n_steps']} control periods x {result['substeps']} RK4 substeps; states agree to "
+                  f"{result['max_abs_state_difference']:.1e} (backstepping), "
+                  f"{result['max_abs_state_difference_nn']:.1e} (NN-adaptive)"]
+    lines.append("")
     for key, label in ROWS:
         if key not in result:
             continue
@@ -291,6 +320,9 @@ def table(result: dict[str, object]) -> str:
             continue
         if key.startswith("ratio"):
             lines.append(f"  {label:<44} {value:10.1f} x   (min/min {result[key + '_min']:.1f} x)")
+            continue
+        if key.startswith("phase_"):
+            lines.append(f"  {label:<44} {value * 1e3:10.1f} ms")
             continue
         minimum = key[:-2] + "_min_s"
         extra = f"   (min {result[minimum] * 1e3:.1f} ms)" if minimum in result else ""
@@ -309,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cli-repeats", type=int, default=3, help="cold and warm CLI runs each [default 3]")
     parser.add_argument("--control-repeats", type=int, default=3,
                         help="timed python-control runs (pip install -e '.[bench]'), about 1.2 s each; 0 skips them")
+    parser.add_argument("--cli-only", action="store_true",
+                        help="only the whole-process figures: ddtrack run cold and warm against the plain Python script")
     parser.add_argument("--batch-sizes", default="256,1024",
                         help="batch sizes tried for the batch throughput (comma-separated); '' skips it")
     args = parser.parse_args(argv)
@@ -319,10 +353,11 @@ def main(argv: list[str] | None = None) -> int:
 
     load_start = load_average()
     try:
-        figures = measure_library(args.repeats, max(1, python_repeats), max(1, args.python_nn_repeats),
-                                  args.control_repeats, batch_sizes)  # imports jax: first
-        if args.cli_repeats:
-            figures.update(measure_cli(args.cli_repeats))
+        figures = {} if args.cli_only else measure_library(
+            args.repeats, max(1, python_repeats), max(1, args.python_nn_repeats), args.control_repeats,
+            batch_sizes)  # imports jax: first
+        if args.cli_repeats or args.cli_only:
+            figures.update(measure_cli(max(1, args.cli_repeats)))
     except Disagreement as exc:
         print(f"bench/speed.py: FAILED the agreement check: {exc}", file=sys.stderr)
         return 1

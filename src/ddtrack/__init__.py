@@ -6,22 +6,49 @@ Quick start::
     scenario = ddtrack.load_scenario("scenarios/paper_line.toml")
     result = ddtrack.run(scenario, seed=0)
     columns = ddtrack.timeseries(result)     # NumPy columns: t, x, y, ..., e_tr, tau_r, tau_l
+
+``import ddtrack`` is light: the names below are imported on first use (PEP 562), so the command line's
+``--help`` or a script that only loads scenarios does not pay for JAX. JAX runs in float64 and Gymnasium knows
+``ddtrack/DiffDriveTracking-v0`` as soon as either is imported, before or after ddtrack.
 """
-import jax as _jax
+from importlib import import_module as _import_module
 
-_jax.config.update("jax_enable_x64", True)  # float64 everywhere (DESIGN 1); set before any array exists
+from ._after_import import after_import as _after_import
 
-from .errors import ConfigError, DdtrackError, RunError  # noqa: E402
-from .metrics import improvement, summarize, tracking_error  # noqa: E402
-from .runner import monte_carlo, prepare, run, run_batch  # noqa: E402
-from .scenario import Scenario, load_scenario, validate_scenario  # noqa: E402
-from .sim import Draws, SimResult, simulate, timeseries  # noqa: E402
-from .envs import register_envs as _register_envs  # noqa: E402,F401  (registers ddtrack/DiffDriveTracking-v0)
+
+def _enable_float64(jax) -> None:
+    jax.config.update("jax_enable_x64", True)  # float64 everywhere: set before any array exists
+
+
+def _register_env(gymnasium) -> None:
+    from .envs import register_envs  # one place registers ddtrack/DiffDriveTracking-v0
+
+    register_envs()
+
+
+_after_import("jax", _enable_float64)
+_after_import("gymnasium", _register_env)
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "ConfigError", "DdtrackError", "Draws", "RunError", "Scenario", "SimResult", "improvement", "load_scenario",
-    "monte_carlo", "prepare", "run", "run_batch", "simulate", "summarize", "timeseries", "tracking_error",
-    "validate_scenario",
-]
+_SOURCES = {
+    "ConfigError": "errors", "DdtrackError": "errors", "RunError": "errors",
+    "improvement": "metrics", "summarize": "metrics", "tracking_error": "metrics",
+    "monte_carlo": "runner", "prepare": "runner", "run": "runner", "run_batch": "runner",
+    "Scenario": "scenario", "load_scenario": "scenario", "validate_scenario": "scenario",
+    "Draws": "sim", "SimResult": "sim", "simulate": "sim", "timeseries": "sim",
+}
+
+__all__ = sorted(_SOURCES)
+
+
+def __getattr__(name: str):
+    if name not in _SOURCES:
+        raise AttributeError(f"module 'ddtrack' has no attribute '{name}'")
+    value = getattr(_import_module(f".{_SOURCES[name]}", __name__), name)
+    globals()[name] = value  # the next access is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_SOURCES))

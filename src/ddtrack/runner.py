@@ -66,6 +66,15 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
     return float(value + draw.absolute * r)
 
 
+@partial(jax.jit, static_argnames="n_steps")
+def _seed_draws(seed: int, n_steps: int) -> tuple[dict, tuple, Array, Array]:
+    """Every key and standard-normal draw of one run as one program: drawn one by one, each is a dispatch of
+    its own, and together they cost an interactive run more than the simulation (same bits either way)."""
+    keys = streams(seed)
+    disturbance = jax.random.normal(keys["disturbance"], (n_steps, 2))
+    return keys, tuple(jax.random.split(keys["controller"], 3)), disturbance, jax.random.normal(keys["noise"], (n_steps, 5))
+
+
 def controller_keys(seed: int) -> tuple[jax.Array, jax.Array, jax.Array]:
     """The controller stream split into (construction, identification, run) keys."""
     k_build, k_identify, k_run = jax.random.split(streams(seed)["controller"], 3)
@@ -105,18 +114,11 @@ def prepare(scenario: Scenario, *, seed: int | None = None, identification: Iden
         The run's standard-normal draws (disturbance, noise) and the controller's PRNG key.
     """
     seed = scenario.simulation.seed if seed is None else seed
-    keys = streams(seed)
-    k_build, k_identify, k_run = controller_keys(seed)
+    keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, scenario.simulation.n_steps)
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
     if identify and needs_identification(scenario):
         setup = with_identification(scenario, setup, k_identify, identification)
-    n = scenario.simulation.n_steps
-    draws = Draws(
-        disturbance=jax.random.normal(keys["disturbance"], (n, 2)),
-        noise=jax.random.normal(keys["noise"], (n, 5)),
-        controller_key=k_run,
-    )
-    return setup, draws
+    return setup, Draws(disturbance=disturbance, noise=noise, controller_key=k_run)
 
 
 def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
