@@ -34,7 +34,8 @@ def paper_line_run(tmp_path_factory):
 def test_run_writes_the_documented_folder(paper_line_run):
     code, out = paper_line_run
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["figures", "metrics.json", "scenario.toml", "timeseries.parquet"]
+    assert sorted(p.name for p in out.iterdir()) == ["ddtrack.json", "figures", "metrics.json", "scenario.toml",
+                                                     "timeseries.parquet"]
     figures = sorted(p.name for p in (out / "figures").iterdir())
     assert figures == ["errors.png", "path.png", "states.png", "torques.png"]
     for png in (out / "figures").iterdir():

@@ -11,17 +11,15 @@ import errno
 import os
 import shutil
 import subprocess
-import tomllib
 import uuid
 from pathlib import Path
 
-import pyarrow.parquet as pq
 import pytest
 
 import ddtrack.mc
 import ddtrack.runner
 from conftest import SCENARIOS
-from ddtrack import rundir, sweep
+from ddtrack import outdir, sweep
 from ddtrack.errors import RunError
 
 SHORT = ("--set", "simulation.duration=1.0", "--set", "simulation.metric_window=[0.0, 1.0]")
@@ -55,9 +53,9 @@ class FullDisk:
 
 
 def fill_disk(monkeypatch, *, victim: str, room: int = 100) -> None:
-    """Make ``rundir.atomic_write`` see a full disk while writing a file named ``victim``."""
+    """Make ``outdir.atomic_write`` see a full disk while writing a file named ``victim``."""
 
-    class Os:  # rundir's view of ``os``; the real module is left alone
+    class Os:  # outdir's view of ``os``; the real module is left alone
         def __getattr__(self, name):
             return getattr(os, name)
 
@@ -67,7 +65,7 @@ def fill_disk(monkeypatch, *, victim: str, room: int = 100) -> None:
             file = os.fdopen(fd, mode)
             return FullDisk(file, room) if name.startswith(f".{victim}.") else file
 
-    monkeypatch.setattr(rundir, "os", Os())
+    monkeypatch.setattr(outdir, "os", Os())
 
 
 def listing(folder: Path) -> list[str]:
@@ -86,35 +84,41 @@ def test_atomic_write_failing_midway_leaves_the_old_file_and_no_temporary(tmp_pa
     path.write_bytes(b"old and whole")
     fill_disk(monkeypatch, victim="data.bin", room=1000)
     with pytest.raises(RunError, match=r"data\.bin.*No space left on device") as caught:
-        rundir.atomic_write(path, lambda f: f.write(b"x" * 5000))
+        outdir.atomic_write(path, lambda f: f.write(b"x" * 5000))
     assert caught.value.__cause__.errno == errno.ENOSPC  # the cause stays reachable from Python
     assert listing(tmp_path) == ["data.bin"] and path.read_bytes() == b"old and whole"
 
 
-@pytest.mark.parametrize("victim, before", [("scenario.toml", []), ("timeseries.parquet", ["scenario.toml"]),
-                                            ("metrics.json", ["scenario.toml", "timeseries.parquet"])])
-def test_run_on_a_full_disk_exits_2_and_keeps_only_whole_files(tmp_path, cli, monkeypatch, victim, before):
+@pytest.mark.parametrize("victim", ["scenario.toml", "timeseries.parquet", "metrics.json"])
+def test_run_on_a_full_disk_exits_2_and_leaves_no_part_of_the_run(tmp_path, cli, monkeypatch, victim):
     fill_disk(monkeypatch, victim=victim)
     out = tmp_path / "run"
     code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", *SHORT, "--out", out)
     assert_clean_error(code, stderr, victim)
-    assert listing(out) == before  # the files before the failing one, whole; nothing after it
-    if "scenario.toml" in before:
-        assert tomllib.loads((out / "scenario.toml").read_text())["name"] == "paper_line"
-    if "timeseries.parquet" in before:
-        assert pq.read_table(out / "timeseries.parquet").num_rows == 100  # 1 s at T_c = 0.01 s
+    assert str(out / victim) in stderr  # the user's folder is named, not the hidden staging one
+    assert listing(tmp_path) == []  # the run is written whole or not at all; no staging folder left
+
+
+@pytest.mark.parametrize("victim", ["timeseries.parquet", "metrics.json"])
+def test_a_failed_rerun_leaves_the_earlier_run_whole(tmp_path, cli, monkeypatch, victim):
+    out = tmp_path / "run"
+    assert cli("run", SCENARIOS / "paper_line.toml", *SHORT, "--out", out)[0] == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    fill_disk(monkeypatch, victim=victim)
+    code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", *SHORT, "--seed", "1", "--out", out)
+    assert_clean_error(code, stderr, victim)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert listing(tmp_path) == ["run", *(f"run/{name}" for name in listing(out))]
 
 
 @pytest.mark.slow  # compiles the Monte Carlo batch (about 5 s)
-@pytest.mark.parametrize("victim, before", [("runs.parquet", []), ("summary.json", ["runs.csv", "runs.parquet"])])
-def test_mc_on_a_full_disk_exits_2_and_keeps_only_whole_files(tmp_path, cli, monkeypatch, victim, before):
+@pytest.mark.parametrize("victim", ["runs.parquet", "summary.json"])
+def test_mc_on_a_full_disk_exits_2_and_leaves_nothing(tmp_path, cli, monkeypatch, victim):
     fill_disk(monkeypatch, victim=victim)
     out = tmp_path / "mc"
     code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", *SHORT, "--out", out)
     assert_clean_error(code, stderr, victim)
-    assert listing(out) == before
-    if before:
-        assert pq.read_table(out / "runs.parquet").num_rows == 2
+    assert listing(tmp_path) == []
 
 
 def test_sweep_store_on_a_full_disk_keeps_only_whole_records(tmp_path, monkeypatch):
@@ -174,11 +178,10 @@ def test_run_into_a_real_full_disk(mount, cli):
     out = disk / "run"
     code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--out", out)
     assert_clean_error(code, stderr, "timeseries.parquet")
-    assert listing(out) == ["scenario.toml"]
-    assert tomllib.loads((out / "scenario.toml").read_text())["simulation"]["duration"] == 40.0
-    # and no space is held by a hidden or deleted-but-open temporary: only scenario.toml's page is used
+    assert listing(disk) == []  # no part of the run, no staging folder
+    # and no space is held by a hidden or deleted-but-open temporary
     stat = os.statvfs(disk)
-    assert (stat.f_blocks - stat.f_bfree) * stat.f_frsize <= 8192
+    assert (stat.f_blocks - stat.f_bfree) * stat.f_frsize <= 4096
 
 
 def refuse_to_simulate(*args, **kwargs):

@@ -18,6 +18,10 @@ from .errors import ConfigError, RunError
 
 LISTS = ("controllers", "trajectories", "disturbances")
 
+overwrite_option = click.option(
+    "--overwrite", is_flag=True,
+    help="Replace another ddtrack command's output (or, for sweep and bench, another study) in --out, whole.")
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="ddtrack")
@@ -32,15 +36,17 @@ def cli() -> None:
               help="Override a scenario value, e.g. --set robot.mass=12 (repeatable).")
 @click.option("--seed", type=click.IntRange(min=0), help="Replace simulation.seed.")
 @click.option("--out", type=click.Path(path_type=Path), help="Run folder [default: runs/NAME].")
-def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed: int | None, out: Path | None) -> int:
+@overwrite_option
+def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed: int | None, out: Path | None,
+        overwrite: bool) -> int:
     """Simulate SCENARIO once and write a run folder."""
     from .scenario import load_scenario
 
     spec = load_scenario(scenario, overrides=overrides, seed=seed, controller=controller)
     folder = out if out is not None else Path("runs") / folder_name(spec.name)
-    from .rundir import check_writable
+    from .outdir import check_output, staged_folder
 
-    check_writable(folder)  # before spending time on the simulation
+    check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     enable_compilation_cache()
     from .metrics import summarize
     from .rundir import write_run
@@ -59,7 +65,8 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
         identification = {"samples": int(found.samples), "epochs": int(found.epoch_loss.shape[0]),
                           "epoch_loss": [float(v) for v in found.epoch_loss],
                           "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True))}
-    write_run(folder, spec, columns, metrics, identification)
+    with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
+        write_run(stage, spec, columns, metrics, identification)
     click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
                f"{sim.duration:g} s -> {folder}")
     if result.status_name != "ok":
@@ -120,20 +127,22 @@ def list_(what: str | None) -> int:
               help="Seeds per case (common random numbers across controllers).")
 @click.option("--ablations", is_flag=True, help="Add the NN variants: Jacobian source, error Jacobian, "
               "no identification, no online learning.")
-def reproduce(out: Path, seeds: int, ablations: bool) -> int:
+@overwrite_option
+def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
     """The paper's Table 1 and Figs. 10-17: backstepping vs NN-adaptive backstepping, both cases.
 
     Exit code 1 if NN-adaptive backstepping does not beat backstepping in a case.
     """
-    from .rundir import check_writable
+    from .outdir import check_output, staged_folder
 
-    check_writable(out)
+    check_output(out, command="reproduce", overwrite=overwrite)
     enable_compilation_cache()
     from .reproduce import nn_beats_backstepping
     from .reproduce import reproduce as run_reproduce
     from .reproduce import table_markdown
 
-    table = run_reproduce(out, seeds=seeds, ablations=ablations)
+    with staged_folder(out, command="reproduce") as stage:
+        table = run_reproduce(stage, seeds=seeds, ablations=ablations)
     click.echo(table_markdown(table))
     click.echo(f"wrote {out}/table1.md, table1.csv, table1.json and figures/ in {table['elapsed_s']:.0f} s")
     losing = [name for name, wins in nn_beats_backstepping(table).items() if not wins]
@@ -155,10 +164,11 @@ def reproduce(out: Path, seeds: int, ablations: bool) -> int:
 @click.option("--chunk", type=click.IntRange(min=1, max=100_000), default=64, show_default=True,
               help="Runs per vmapped batch (bounds memory).")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/mc"), show_default=True)
+@overwrite_option
 def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...], overrides: tuple[str, ...],
-       chunk: int, out: Path) -> int:
+       chunk: int, out: Path, overwrite: bool) -> int:
     """Monte Carlo: N seeds of SCENARIO for each controller, on common random numbers."""
-    from .rundir import check_writable
+    from .outdir import check_output, staged_folder
 
     names = [c.strip() for c in controllers.split(",") if c.strip()]
     if not names or len(set(names)) != len(names):
@@ -172,13 +182,14 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
                           "choose a smaller --seed")
 
     specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
-    check_writable(out)
+    check_output(out, command="mc", overwrite=overwrite)
     enable_compilation_cache()
     with progress_bar(n * len(names), "runs") as advance:
         rows = run_specs(specs, n=n, seed=seed, chunk_size=chunk,
                          on_chunk=lambda name, done: advance(names.index(name) * n + done, name))
     summary = summarise(rows)
-    write(out, rows, summary)
+    with staged_folder(out, command="mc") as stage:
+        write(stage, rows, summary)
     click.echo(format_summary(summary, n))
     click.echo(f"wrote {out}/runs.parquet, runs.csv, summary.json")
     failed = sum(row["status"] != "ok" for runs in rows.values() for row in runs)
@@ -206,12 +217,13 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override every scenario.")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/tune"), show_default=True,
               help="Folder for tuned.toml, loss.csv, loss.png, tune.json.")
+@overwrite_option
 def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, learning_rate: float,
          effort_weight: float, gamma: tuple[float, float, float], whole_run: bool, overrides: tuple[str, ...],
-         out: Path) -> int:
+         out: Path, overwrite: bool) -> int:
     """Tune a controller's constant gains by gradient descent through whole simulated rollouts of SCENARIO...
     (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
-    from .rundir import check_writable
+    from .outdir import check_output, staged_folder
     from .scenario import load_scenario
     from .tune import TUNABLE, problems, write
     from .tune import tune as run_tuning
@@ -221,7 +233,7 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     if min(gamma) < 0 or max(gamma) == 0:
         raise ConfigError("--gamma", f"{gamma} must be >= 0 and not all 0", "e.g. --gamma 1 1 0 (the squared e_tr)")
     specs = [load_scenario(path, overrides=overrides, controller=controller) for path in scenarios]
-    check_writable(out)
+    check_output(out, command="tune", overwrite=overwrite)
     enable_compilation_cache()
     initial = specs[0].controller.gains
     with progress_bar(steps + 1, "tuning") as advance:
@@ -231,7 +243,8 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     settings = {"scenarios": [str(p) for p in scenarios], "controller": controller, "seeds": seeds, "steps": steps,
                 "learning_rate": learning_rate, "effort_weight": effort_weight, "whole_run": whole_run, "gamma": list(gamma),
                 "overrides": list(overrides), "initial_gains": list(initial)}
-    write(out, result, controller, settings)
+    with staged_folder(out, command="tune") as stage:
+        write(stage, result, controller, settings)
     click.echo(f"gains {', '.join(f'{g:.4g}' for g in initial)} -> {', '.join(f'{g:.4g}' for g in result.gains)}; "
                f"loss {result.initial_loss:.4g} -> {result.final_loss:.4g} "
                f"({100 * (1 - result.final_loss / result.initial_loss):.1f} % lower)")
@@ -257,8 +270,10 @@ def cluster_options(command: Callable) -> Callable:
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
+@overwrite_option
 @cluster_options
-def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> int:
+def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, scheduler_file: Path | None,
+          workers: int | None) -> int:
     """Run a parameter sweep (SWEEP.toml, see docs/sweeps.md) on Dask, resumably.
 
     Without --scheduler or --scheduler-file, an embedded cluster on 127.0.0.1 runs it.
@@ -268,10 +283,12 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
 
     spec = read_sweep(sweep_file)
     plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing
-    from .rundir import check_writable
+    from .outdir import check_output, start_resumable
 
-    check_writable(out)
+    study = plan_identity(plan.runs)
+    resume = check_output(out, command="sweep", overwrite=overwrite, study=study)  # the same sweep resumes
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(len(plan.runs), "runs") as advance:
+        start_resumable(out, command="sweep", study=study, resume=resume)
         outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done))
     click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
                f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
@@ -286,20 +303,23 @@ def sweep(sweep_file: Path, out: Path, scheduler: str | None, scheduler_file: Pa
 @click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/bench"), show_default=True,
               help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.")
+@overwrite_option
 @cluster_options
-def bench(suite_name: str, controllers: str | None, out: Path, scheduler: str | None, scheduler_file: Path | None,
-          workers: int | None) -> int:
+def bench(suite_name: str, controllers: str | None, out: Path, overwrite: bool, scheduler: str | None,
+          scheduler_file: Path | None, workers: int | None) -> int:
     """Rank controllers over trajectories, uncertainty levels and seeds on common random numbers, with a
     robustness map over mass and friction; see docs/benchmarks.md."""
     check_cluster_options(scheduler, scheduler_file, workers)
-    from .rundir import check_writable
+    from .outdir import check_output, start_resumable
     from .suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
 
     names = controller_names([c.strip() for c in controllers.split(",") if c.strip()] if controllers else None)
     plan_suite(SUITES[suite_name], names, (1.0, 55.0, 15.0))  # every cell resolves: bad input writes nothing
-    check_writable(out)
+    study = f"{suite_name}: {', '.join(names)}"
+    resume = check_output(out, command="bench", overwrite=overwrite, study=study)  # the same suite resumes
     enable_compilation_cache()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        start_resumable(out, command="bench", study=study, resume=resume)
         summary = run_suite(SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total))
     from .sweep import read_records
 
@@ -323,7 +343,7 @@ def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
     trail, and the adapted gains beside it when they moved. At most 600 frames: a longer run plays faster."""
     from .animation import animate as write_animation
     from .animation import read_run
-    from .rundir import check_writable
+    from .outdir import check_writable
 
     columns, spec = read_run(folder)
     out = out if out is not None else folder / "animation.gif"
@@ -358,6 +378,13 @@ def report(folder: Path, out: Path | None) -> int:
 
     click.echo(f"wrote {write_report(folder, out=out)}")
     return 0
+
+
+def plan_identity(keys) -> str:
+    """A short fingerprint of a sweep's runs: a folder resumes only the sweep that wrote it."""
+    import hashlib
+
+    return hashlib.sha256("\n".join(sorted(keys)).encode()).hexdigest()[:16]
 
 
 def check_cluster_options(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> None:

@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 
 from .errors import ConfigError
 from .metrics import improvement, mean_ci
-from .rundir import atomic_write
+from .outdir import atomic_write
 from .runner import monte_carlo
 from .scenario import Scenario, load_scenario
 

@@ -36,7 +36,7 @@ from matplotlib.colors import LogNorm
 from .errors import RunError
 from .metrics import improvement
 from .plotting import ADAPTIVE, ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt
-from .rundir import atomic_write, check_writable
+from .outdir import atomic_write, check_writable
 from .sim import REMEDIES
 
 #: folder kind -> the files that identify it (all must be present); checked in this order

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt
 
 from .metrics import improvement, mean_ci, summarize
 from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
-from .rundir import atomic_write
+from .outdir import atomic_write
 from .runner import prepare, run_setup
 from .scenario import Scenario, load_scenario
 from .sim import timeseries

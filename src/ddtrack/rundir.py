@@ -6,8 +6,6 @@ folder never holds a half-written file.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO
@@ -18,58 +16,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import tomli_w
 
-from .errors import RunError
+from .outdir import atomic_write
 from .plotting import plot_errors, plot_gains, plot_path, plot_states, plot_torques
 from .scenario import Scenario, to_toml_dict
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` through ``write(file)`` on a temporary sibling, then rename it into place.
-
-    A write that fails midway (a full disk, a folder that went read-only) removes its temporary and
-    raises :class:`RunError` naming ``path`` and the cause (``No space left on device``): the folder
-    keeps only the files that were whole before, and the command line prints one line, exit code 2.
-    """
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise RunError(f"cannot write '{path}' ({exc.strerror or exc})") from exc
-    try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would hide results from the user's group
-        with os.fdopen(fd, "wb") as file:
-            write(file)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise RunError(f"cannot write '{path}' ({exc.strerror or exc}); "
-                           "nothing partial was left: free some space or choose another --out") from exc
-        raise
-
-
-def check_writable(folder: Path) -> None:
-    """Fail early, before any simulation, if ``folder`` cannot be created or written. Creates nothing: a
-    command that fails later (an unreachable scheduler, a diverged case) leaves no empty folder behind."""
-    existing = Path(folder).absolute()
-    while not existing.exists():
-        existing = existing.parent
-    try:
-        if not existing.is_dir():
-            raise NotADirectoryError(20, "Not a directory", str(existing))
-        with tempfile.TemporaryFile(dir=existing):
-            pass
-    except OSError as exc:
-        raise RunError(f"output folder '{folder}' cannot be written ({exc.strerror or exc}); "
-                       "choose another with --out") from None
 
 
 def float64_array(values) -> pa.Array:

@@ -31,7 +31,7 @@ import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .errors import ConfigError, did_you_mean
-from .rundir import atomic_write
+from .outdir import atomic_write
 from .runner import enable_compilation_cache, monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
 

@@ -29,7 +29,7 @@ import tomli_w
 from .errors import ConfigError
 from .metrics import window_mask
 from .model import DynamicPlant
-from .rundir import atomic_write
+from .outdir import atomic_write
 from .runner import prepare_batch
 from .scenario import Scenario
 from .sim import simulate_batch

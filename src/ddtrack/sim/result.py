@@ -102,8 +102,9 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     columns = {
         "t": np.asarray(result.t, dtype=float)[rows],
         "x": state[:, 0], "y": state[:, 1], "theta": state[:, 2], "v": state[:, 3], "omega": state[:, 4],
-        "x_ref": ref["x"], "y_ref": ref["y"], "v_ref": ref["v"], "omega_ref": ref["omega"],
+        "x_ref": ref["x"], "y_ref": ref["y"],
         "theta_ref": state[:, 2] + error[:, 2],  # continuous like theta; the reference's own is wrapped
+        "v_ref": ref["v"], "omega_ref": ref["omega"],
         "e_x": error[:, 0], "e_y": error[:, 1], "e_theta": error[:, 2], "e_tr": np.hypot(error[:, 0], error[:, 1]),
         "v_cmd": logs.pop("v_cmd", control[:, 0]), "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
         "tau_r": logs.pop("tau_r", nan), "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
