@@ -75,12 +75,15 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
         return 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
     settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant
-    click.echo(f"  e_tr over {window}: mean {metrics['e_tr_mean']:.4f} m, rms {metrics['e_tr_rms']:.4f} m, "
-               f"max {metrics['e_tr_max']:.4f} m, final {metrics['e_tr_final']:.4f} m")
+    from ._format import percent, significant
+
+    click.echo(f"  e_tr over {window}: mean {significant(metrics['e_tr_mean'])} m, "
+               f"rms {significant(metrics['e_tr_rms'])} m, max {significant(metrics['e_tr_max'])} m, "
+               f"final {significant(metrics['e_tr_final'])} m")
     click.echo(f"  settling (e_tr < {sim.settling_threshold:g} m): "
-               f"{'never' if settle is None else f'{settle:.2f} s'}; "
-               f"effort {'none (no torques)' if effort is None else f'{effort:.1f} N^2 m^2 s'}; "
-               f"saturated {100 * metrics['saturation_fraction']:.1f} % of the time")
+               f"{'never' if settle is None else f'{significant(settle)} s'}; "
+               f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
+               f"saturated {percent(metrics['saturation_fraction'])} of the time")
     return 0
 
 

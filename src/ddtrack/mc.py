@@ -11,8 +11,9 @@ import pyarrow as pa
 import pyarrow.csv  # noqa: F401  (pa.csv)
 import pyarrow.parquet as pq
 
+from ._format import significant, with_interval
 from .errors import ConfigError
-from .metrics import improvement, mean_ci
+from .metrics import METRIC_DOMAINS, improvement, mean_ci
 from .outdir import atomic_write
 from .runner import monte_carlo
 from .scenario import Scenario, load_scenario
@@ -53,12 +54,13 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
     baseline = rows[names[0]]
     summary: dict = {"controllers": {}, "improvement_over": names[0], "improvement": {}}
     for name, runs in rows.items():
-        summary["controllers"][name] = {key: mean_ci([r[key] for r in runs]) for key in STATISTICS}
+        summary["controllers"][name] = {key: mean_ci([r[key] for r in runs], domain=METRIC_DOMAINS[key])
+                                         for key in STATISTICS}
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
         if name != names[0]:
             paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) for b, r in zip(baseline, runs, strict=True)
                       if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0]
-            summary["improvement"][name] = mean_ci(paired) | {"paired_runs": len(paired)}
+            summary["improvement"][name] = mean_ci(paired, domain=METRIC_DOMAINS["improvement"]) | {"paired_runs": len(paired)}
     return summary
 
 
@@ -93,16 +95,19 @@ def format_summary(summary: dict, n: int) -> str:
         if e["mean"] is None:
             text = "all runs failed"
         elif e["ci_low"] is None:
-            text = f"{e['mean']:.4f} m (one run: no interval)"
+            text = f"{significant(e['mean'])} m (one run: no interval)"
         else:
-            text = f"{e['mean']:.4f} [{e['ci_low']:.4f}, {e['ci_high']:.4f}] m"
-        lines.append(f"  {name:<26} e_tr_mean {text}; failures {stats['failures']}")
+            text = f"{with_interval(e['mean'], e['ci_low'], e['ci_high'])} m"
+        saturated = stats["saturation_fraction"]
+        scaled = [None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")]
+        lines.append(f"  {name:<26} e_tr_mean {text}; saturated {with_interval(*scaled)} %; "
+                     f"failures {stats['failures']}")
     for name, gain in summary["improvement"].items():
         if gain["mean"] is None:
             lines.append(f"  {name} vs {summary['improvement_over']}: no paired runs")
         elif gain["ci_low"] is None:
-            lines.append(f"  {name} vs {summary['improvement_over']}: {gain['mean']:.1f} % (one paired run)")
+            lines.append(f"  {name} vs {summary['improvement_over']}: {significant(gain['mean'])} % (one paired run)")
         else:
-            lines.append(f"  {name} vs {summary['improvement_over']}: improvement {gain['mean']:.1f} % "
-                         f"[{gain['ci_low']:.1f}, {gain['ci_high']:.1f}] (paired, {gain['paired_runs']} seeds)")
+            lines.append(f"  {name} vs {summary['improvement_over']}: improvement "
+                         f"{with_interval(gain['mean'], gain['ci_low'], gain['ci_high'])} % (paired, {gain['paired_runs']} seeds)")
     return "\n".join(lines)

@@ -91,9 +91,49 @@ def improvement(baseline: float, candidate: float) -> float:
     return 100.0 * (baseline - candidate) / baseline
 
 
+# The range each statistic can take; its confidence interval stays inside it (see :func:`mean_ci`).
+METRIC_DOMAINS = {"e_tr_mean": "nonnegative", "e_tr_rms": "nonnegative", "e_tr_max": "nonnegative",
+                  "e_tr_final": "nonnegative", "settling_time": "nonnegative", "effort": "nonnegative",
+                  "saturation_fraction": "fraction", "improvement": "at_most_100"}
+DOMAINS = ("real", "nonnegative", "fraction", "at_most_100")
+
+
+def _interval(mean: float, se: float, quantile: float, domain: str) -> tuple[float, float]:
+    """mean -/+ quantile * se on a scale where the domain is the whole real line (delta method), mapped back.
+
+    nonnegative: log(m); fraction: logit(m); at_most_100: log(100 - m). On the domain's edge (all values equal to
+    it, e.g. no saturation in any run) the interval is that point."""
+    if domain == "real":
+        return mean - quantile * se, mean + quantile * se
+    if domain == "nonnegative":
+        if mean <= 0.0:
+            return 0.0, 0.0
+        half = quantile * se / mean  # d log(m) / dm = 1 / m
+        return mean * math.exp(-half), mean * math.exp(half)
+    if domain == "fraction":
+        if mean <= 0.0 or mean >= 1.0:
+            return mean, mean
+        centre, half = math.log(mean / (1.0 - mean)), quantile * se / (mean * (1.0 - mean))
+        return 1.0 / (1.0 + math.exp(-(centre - half))), 1.0 / (1.0 + math.exp(-(centre + half)))
+    if domain == "at_most_100":
+        low, high = _interval(100.0 - mean, se, quantile, "nonnegative")
+        return 100.0 - high, 100.0 - low
+    raise ValueError(f"unknown domain '{domain}'; one of {', '.join(DOMAINS)}")
+
+
+def _check_domain(values: np.ndarray, domain: str) -> None:
+    bounds = {"real": (-np.inf, np.inf), "nonnegative": (0.0, np.inf), "fraction": (0.0, 1.0),
+              "at_most_100": (-np.inf, 100.0)}[domain] if domain in DOMAINS else None
+    if bounds is None:
+        raise ValueError(f"unknown domain '{domain}'; one of {', '.join(DOMAINS)}")
+    if values.size and (values.min() < bounds[0] or values.max() > bounds[1]):
+        raise ValueError(f"values outside the domain '{domain}' {list(bounds)}: {values.min()} .. {values.max()}")
+
+
 def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
     """Paired improvement of the pooled mean error, 100 (1 - sum(candidates) / sum(baselines)), with a delta-method
-    confidence interval of the ratio over the pairs; same keys as :func:`mean_ci`.
+    confidence interval of the ratio over the pairs (on log(ratio), so it never passes 100 %); same keys as
+    :func:`mean_ci`.
 
     Unlike the mean of per-pair improvements, it stays finite when some baseline errors are near zero (an exact
     model): each pair weighs by its baseline error. Pairs with a None on either side are counted as ``missing``.
@@ -109,13 +149,21 @@ def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
     summary["mean"] = 100.0 * (1.0 - ratio)
     if len(pairs) >= 2:  # var(ratio) ~ var(c_i - ratio b_i) / (n mean(b)^2), the ratio estimator's delta method
         se = np.std(cand - ratio * base, ddof=1) / (np.sqrt(len(pairs)) * base.mean())
-        half = 100.0 * float(stats.t.ppf(0.5 + confidence / 2, len(pairs) - 1) * se)
-        summary |= {"ci_low": summary["mean"] - half, "ci_high": summary["mean"] + half}
+        quantile = float(stats.t.ppf(0.5 + confidence / 2, len(pairs) - 1))
+        low, high = _interval(float(ratio), float(se), quantile, "nonnegative" if ratio >= 0 else "real")
+        summary |= {"ci_low": 100.0 * (1.0 - high), "ci_high": 100.0 * (1.0 - low)}
     return summary
 
 
-def mean_ci(values, confidence: float = 0.95) -> dict:
-    """Mean and the two-sided Student-t confidence interval of the mean over independent values (seeds).
+def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
+    """Mean and a two-sided confidence interval of the mean over independent values (seeds), inside ``domain``.
+
+    ``domain`` is the range the values can take (:data:`METRIC_DOMAINS` maps each statistic to its own):
+    ``"real"`` gives the Student-t interval mean -/+ t s / sqrt(n). The others build that interval on a scale
+    where the domain is the whole line and map it back (delta method): log(m) for ``"nonnegative"`` values (errors,
+    effort, settling time), logit(m) for a ``"fraction"`` (saturation), log(100 - m) for ``"at_most_100"``
+    (improvements in %). So the interval never leaves the domain, is asymmetric where the values are skewed,
+    and is the single point m when all values sit on the domain's edge (no saturation in any run: [0, 0]).
 
     None entries (a failed run, a settling time never reached) are left out and counted as ``missing``;
     the mean is None when nothing is left, the interval None with fewer than two values.
@@ -123,14 +171,16 @@ def mean_ci(values, confidence: float = 0.95) -> dict:
     from scipy import stats
 
     present = np.asarray([v for v in values if v is not None], dtype=float)
+    _check_domain(present, domain)
     summary = {"mean": None, "ci_low": None, "ci_high": None, "n": int(present.size),
                "missing": len(values) - int(present.size)}
     if present.size:
         summary["mean"] = float(np.mean(present))
     if present.size >= 2:
-        half = float(stats.t.ppf(0.5 + confidence / 2, present.size - 1) * np.std(present, ddof=1)
-                     / np.sqrt(present.size))
-        summary |= {"ci_low": summary["mean"] - half, "ci_high": summary["mean"] + half}
+        se = float(np.std(present, ddof=1) / np.sqrt(present.size))
+        quantile = float(stats.t.ppf(0.5 + confidence / 2, present.size - 1))
+        low, high = _interval(summary["mean"], se, quantile, domain)
+        summary |= {"ci_low": low, "ci_high": high}
     return summary
 
 

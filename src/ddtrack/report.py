@@ -33,6 +33,7 @@ from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from markupsafe import Markup
 from matplotlib.colors import LogNorm
 
+from ._format import significant
 from .errors import RunError
 from .metrics import improvement
 from .plotting import ADAPTIVE, ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt
@@ -201,7 +202,8 @@ def _field(data: Any, *keys: str, path: Path) -> Any:
 
 
 def fmt(value: Any, digits: int = 4, scale: float = 1.0) -> str:
-    """A value as table text: 4 significant digits, '–' for a missing value."""
+    """A value as table text: ``digits`` significant digits (:func:`ddtrack._format.significant`), '–' for a missing
+    value."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "–"
     if isinstance(value, bool):
@@ -209,7 +211,7 @@ def fmt(value: Any, digits: int = 4, scale: float = 1.0) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return f"{value * scale:.{digits}g}"
+        return significant(value * scale, digits)
     if isinstance(value, list | tuple):
         return _short_list(value)
     return str(value)

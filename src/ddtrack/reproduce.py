@@ -18,7 +18,8 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from .metrics import improvement, mean_ci, summarize
+from ._format import with_interval
+from .metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
 from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
 from .outdir import atomic_write
 from .runner import prepare, run_setup
@@ -88,9 +89,9 @@ def run_case(name: str, seeds: int, variants: dict[str, list[str]],
     return result
 
 
-def _with_values(values: list) -> dict:
-    """:func:`mean_ci` plus the per-seed values, so the table can be re-derived from the JSON."""
-    return mean_ci(values) | {"values": values}
+def _with_values(values: list, key: str) -> dict:
+    """:func:`mean_ci` in the statistic's domain plus the per-seed values, so the table can be re-derived."""
+    return mean_ci(values, domain=METRIC_DOMAINS[key]) | {"values": values}
 
 
 def summarise_case(name: str, case: CaseResult) -> dict:
@@ -99,24 +100,21 @@ def summarise_case(name: str, case: CaseResult) -> dict:
     entry: dict = {"title": CASES[name], "window": list(case.scenario.simulation.window),
                    "paper": PAPER_TABLE[name], "controllers": {}, "improvement": {}}
     for variant, runs in case.metrics.items():
-        entry["controllers"][variant] = {key: _with_values([r[key] for r in runs]) for key in STATISTICS}
+        entry["controllers"][variant] = {key: _with_values([r[key] for r in runs], key) for key in STATISTICS}
         entry["controllers"][variant]["status"] = [r["status"] for r in runs]
         if runs[0].get("final_gains") is not None and variant != "backstepping":
             entry["controllers"][variant]["final_gains"] = [r["final_gains"] for r in runs]
         if variant != "backstepping":
             paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) if r["e_tr_mean"] is not None else None
                       for b, r in zip(baseline, runs, strict=True)]
-            entry["improvement"][variant] = _with_values(paired)
+            entry["improvement"][variant] = _with_values(paired, "improvement")
     return entry
 
 
-def _fmt(stat: dict, scale: float = 1.0, digits: int = 4) -> str:
+def _fmt(stat: dict) -> str:
     if stat["missing"]:  # a failed run, or a settling time never reached, in some seeds: no mean over the rest
         return f"n/a in {stat['missing']} of {stat['n'] + stat['missing']} seeds"
-    text = f"{stat['mean'] * scale:.{digits}f}"
-    if stat.get("ci_low") is not None:
-        text += f" [{stat['ci_low'] * scale:.{digits}f}, {stat['ci_high'] * scale:.{digits}f}]"
-    return text
+    return with_interval(stat["mean"], stat.get("ci_low"), stat.get("ci_high"))
 
 
 def table_markdown(table: dict) -> str:
@@ -130,8 +128,8 @@ def table_markdown(table: dict) -> str:
             gain = entry["improvement"].get(variant)
             lines.append(
                 f"| {entry['title']} | {variant} | {_fmt(stats['e_tr_mean'])} | {paper if paper else ''} | "
-                f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'], digits=2)} | "
-                f"{_fmt(gain, digits=1) if gain else ''} | "
+                f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'])} | "
+                f"{_fmt(gain) if gain else ''} | "
                 f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |")
     lines += ["", "Statistic: mean of e_tr over each case's metric window (SPEC 4.4): "
               + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())

@@ -24,7 +24,8 @@ import pyarrow.csv  # noqa: F401  (pa.csv)
 import pyarrow.parquet as pq
 
 from .errors import ConfigError
-from .metrics import mean_ci, pooled_improvement
+from ._format import significant, with_interval
+from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
 from .reproduce import scenario_path
 from .outdir import atomic_write
 from .scenario import CONTROLLERS, load_scenario
@@ -166,7 +167,7 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
         entry: dict[str, Any] = {"controller": name, "runs": len(mine),
                                  "failures": sum(r["status"] != "ok" for r in mine)}
         for key in STATISTICS:
-            entry[key] = mean_ci([r.get(key) if r["status"] == "ok" else None for r in mine])
+            entry[key] = mean_ci([r.get(key) if r["status"] == "ok" else None for r in mine], domain=METRIC_DOMAINS[key])
         for reference in (BASELINE, TUNED):
             others = [by_cell.get((reference, r["trajectory"], r["level"], r["seed"]), {}) for r in mine]
             entry[f"improvement_over_{reference}"] = None if reference == name else pooled_improvement(
@@ -175,31 +176,29 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
 
 
-def _ci(summary: dict | None, digits: int = 4) -> str:
+def _ci(summary: dict | None, scale: float = 1.0) -> str:
     if not summary or summary["mean"] is None:
         return ""
-    if summary["ci_low"] is None:
-        return f"{summary['mean']:.{digits}g}"
-    return f"{summary['mean']:.{digits}g} [{summary['ci_low']:.{digits}g}, {summary['ci_high']:.{digits}g}]"
+    return with_interval(*(None if summary[k] is None else scale * summary[k] for k in ("mean", "ci_low", "ci_high")))
 
 
 def board_markdown(board: list[dict], cells: dict) -> str:
     """The leaderboard as Markdown (``leaderboard.md``): mean [95 % CI] of each statistic per controller, paired
     improvements over backstepping and tuned backstepping, then mean e_tr [m] per trajectory and level
     (``cells``, from :func:`cell_means`)."""
-    lines = ["| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated | failures "
+    lines = ["| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] | failures "
              "| vs backstepping [%] | vs tuned backstepping [%] |", "|" + "---|" * 9]
     for e in board:
         lines.append(f"| {e['controller']} | {_ci(e['e_tr_mean'])} | {_ci(e['e_tr_rms'])} | {_ci(e['e_tr_max'])} | "
-                     f"{_ci(e['effort'], 3)} | {_ci(e['saturation_fraction'], 2)} | {e['failures']}/{e['runs']} | "
-                     f"{_ci(e['improvement_over_' + BASELINE], 3)} | {_ci(e['improvement_over_' + TUNED], 3)} |")
+                     f"{_ci(e['effort'])} | {_ci(e['saturation_fraction'], 100.0)} | {e['failures']}/{e['runs']} | "
+                     f"{_ci(e['improvement_over_' + BASELINE])} | {_ci(e['improvement_over_' + TUNED])} |")
     lines += ["", "Mean e_tr [m] per trajectory and uncertainty level (mean over seeds; failed runs left out):", ""]
     columns = sorted({(t, lv) for (_, t, lv) in cells})
     lines.append("| controller | " + " | ".join(f"{t} / {lv}" for t, lv in columns) + " |")
     lines.append("|" + "---|" * (len(columns) + 1))
     for e in board:
         values = [cells.get((e["controller"], t, lv)) for t, lv in columns]
-        lines.append(f"| {e['controller']} | " + " | ".join("" if v is None else f"{v:.4f}" for v in values) + " |")
+        lines.append(f"| {e['controller']} | " + " | ".join("" if v is None else significant(v) for v in values) + " |")
     return "\n".join(lines) + "\n"
 
 
