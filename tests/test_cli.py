@@ -207,3 +207,22 @@ def test_an_overlaid_path_keeps_the_title(paper_line_run):
     plot_path(columns, ax=fig.axes[0], label="again", reference=False)
     assert fig.axes[0].get_title() == "Case 1"
     assert [line.get_label() for line in fig.axes[0].lines][-1] == "again"
+
+
+def test_a_burger_scale_run_prints_its_small_effort_with_significant_digits(tmp_path, cli):
+    """A 1 kg robot with 0.5 N m wheels: the effort is ~1e-3 N^2 m^2 s, which fixed decimals printed as 0.0."""
+    burger = ["robot.mass=1.0", "robot.inertia=0.01", "robot.com_offset=0.0", "robot.wheel_radius=0.033",
+              "robot.half_axle=0.08", "robot.max_torque=0.5", "plant.mass=1.2", "plant.inertia=0.012",
+              "plant.com_offset=0.01", "plant.viscous_friction=0.0005", "plant.coulomb_friction=0.002",
+              "disturbance.bias=[0.0003, 0.0]", "disturbance.amplitude=[0.0005, -0.0005]", "trajectory.speed=0.2",
+              "initial.pose=[0.0, 0.05, 0.785]", "simulation.duration=4", "simulation.metric_window=[2.0, 4.0]",
+              "controller.max_velocity=0.22", "controller.max_yaw_rate=2.8"]
+    out = tmp_path / "burger"
+    code, stdout, _ = cli("run", SCENARIOS / "paper_line.toml", *(a for s in burger for a in ("--set", s)), "--out", out)
+    assert code == 0
+    effort = json.loads((out / "metrics.json").read_text())["effort"]
+    assert 0.0 < effort < 0.01  # the scale that fixed decimals lost
+    printed = stdout.split("effort ")[1].split(" N^2")[0]
+    assert printed != "0.0" and float(printed) == pytest.approx(effort, rel=5e-3)  # 3 significant digits
+    assert len(printed.replace("0.", "", 1).lstrip("0").replace(".", "").split("e")[0]) == 3
+    assert "saturated " in stdout and " % of the time" in stdout
