@@ -32,6 +32,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Polygon  # noqa: E402
 from PIL import Image  # noqa: E402
 
+from ._format import significant  # noqa: E402
 from .errors import ConfigError, RunError  # noqa: E402
 from .plotting import ADAPTIVE, REFERENCE, ROBOT  # noqa: E402
 from .scenario import Scenario, load_scenario  # noqa: E402
@@ -350,7 +351,7 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
         if zoom_ax is not None:
             zoom_ax.set_xlim(c["x"][row] - zoom_half, c["x"][row] + zoom_half)
             zoom_ax.set_ylim(c["y"][row] - zoom_half, c["y"][row] + zoom_half)
-        clock.set_text(f"t = {t[row]:6.2f} s    e_tr = {c['e_tr'][row]:.3f} m")
+        clock.set_text(f"t = {t[row]:6.2f} s    e_tr = {significant(c['e_tr'][row])} m")
         for cursor, done, values in cursors:
             cursor.set_xdata([t[row], t[row]])
             done.set_data(t[: row + 1], values[: row + 1])
