@@ -48,17 +48,16 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
 
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     enable_compilation_cache()
-    from .metrics import summarize
     from .rundir import write_run
-    from .runner import prepare, run_setup
+    from .runner import prepare, run_metrics, run_setup
     from .sim import REMEDIES, timeseries
 
     setup, draws = prepare(spec)
     result = run_setup(spec, setup, draws)
     columns = timeseries(result)
     sim = spec.simulation
-    metrics = summarize(columns, status=result.status_name, window=sim.window, control_period=sim.control_period,
-                        settling_threshold=sim.settling_threshold, failure_time=result.failure_time)
+    nmse = None if setup.identification is None else setup.identification.nmse
+    metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
     identification = None
     if setup.identification is not None:
         found = setup.identification
@@ -84,6 +83,8 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
                f"{'never' if settle is None else f'{significant(settle)} s'}; "
                f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
                f"saturated {percent(metrics['saturation_fraction'])} of the time")
+    for warning in metrics["warnings"]:  # the numbers above may not mean what they seem: say why, on stderr
+        click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
     return 0
 
 
@@ -296,6 +297,8 @@ def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, s
     click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
                f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
                f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
+    if outcome.warnings:
+        click.echo("warnings: " + ", ".join(f"{code} x {count}" for code, count in outcome.warnings.items()))
     click.echo(f"wrote {out}/results.parquet, results.csv")
     return 1 if outcome.errors or outcome.not_ok else 0
 

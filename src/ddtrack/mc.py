@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 
 from ._format import significant, with_interval
 from .errors import ConfigError
-from .metrics import METRIC_DOMAINS, improvement, mean_ci
+from .metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
 from .outdir import atomic_write
 from .runner import monte_carlo
 from .scenario import Scenario, load_scenario
@@ -57,6 +57,7 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
         summary["controllers"][name] = {key: mean_ci([r[key] for r in runs], domain=METRIC_DOMAINS[key])
                                          for key in STATISTICS}
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
+        summary["controllers"][name]["warnings"] = warning_counts(runs)
         if name != names[0]:
             paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) for b, r in zip(baseline, runs, strict=True)
                       if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0]
@@ -65,15 +66,17 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
 
 
 def table(rows: dict[str, list[dict]]) -> pa.Table:
-    """One row per run: controller, seed, drawn plant values, metrics, status."""
+    """One row per run: controller, seed, drawn plant values, metrics, status, and ``warning_codes`` (the run's
+    warning codes, comma-separated; the messages are in ``warnings``)."""
     records = []
     for name, runs in rows.items():
         for r in runs:
-            flat = {k: v for k, v in r.items() if k not in ("window", "final_gains", "failure_time")}
+            flat = {k: v for k, v in r.items() if k not in ("window", "final_gains", "failure_time", "warnings")}
             gains = r.get("final_gains") or [None, None, None]
             records.append({"controller": name, **flat, "window_start": r["window"][0], "window_end": r["window"][1],
                             "failure_time": r.get("failure_time"), "final_kx": gains[0], "final_ky": gains[1],
-                            "final_ktheta": gains[2]})
+                            "final_ktheta": gains[2], "warning_codes": ",".join(w["code"] for w in r["warnings"]),
+                            "warnings": " | ".join(w["message"] for w in r["warnings"])})
     return pa.Table.from_pylist(records)
 
 
@@ -102,6 +105,9 @@ def format_summary(summary: dict, n: int) -> str:
         scaled = [None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")]
         lines.append(f"  {name:<26} e_tr_mean {text}; saturated {with_interval(*scaled)} %; "
                      f"failures {stats['failures']}")
+        if stats["warnings"]:
+            lines.append(f"  {'':<26} warnings: " + ", ".join(f"{code} x {count}"
+                                                              for code, count in stats["warnings"].items()))
     for name, gain in summary["improvement"].items():
         if gain["mean"] is None:
             lines.append(f"  {name} vs {summary['improvement_over']}: no paired runs")

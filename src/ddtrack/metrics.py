@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -185,7 +185,7 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
 
 
 def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
-              settling_threshold: float, failure_time: float | None = None) -> dict:
+              settling_threshold: float, failure_time: float | None = None, warnings: Sequence[dict] = ()) -> dict:
     """The ``metrics.json`` dictionary of a run (DESIGN 4).
 
     Error statistics are over ``window``; settling time, effort and saturation fraction over the
@@ -206,13 +206,16 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
         e_tr [m] below which the run counts as settled.
     failure_time : float, optional
         When a failed run failed [s].
+    warnings : sequence of dict, optional
+        Why the result may not mean what it seems, each ``{"code", "message"}`` (:func:`ddtrack.runner.run_warnings`).
 
     Returns
     -------
     dict
         ``status, window, e_tr_mean, e_tr_rms, e_tr_max, e_tr_final`` [m], ``settling_time`` [s] (None if
         never), ``effort`` [N^2 m^2 s] (None without torques), ``saturation_fraction`` [0..1]; ``final_gains``
-        (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run.
+        (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run; ``warnings``
+        (always present, [] when there are none).
     """
     metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
     keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
@@ -228,4 +231,14 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
     if all(k in columns for k in ("kx", "ky", "ktheta")) and len(columns["t"]):
         gains = [float(columns[k][-1]) for k in ("kx", "ky", "ktheta")]
         metrics["final_gains"] = gains if all(map(math.isfinite, gains)) else None
+    metrics["warnings"] = [dict(w) for w in warnings]
     return metrics
+
+
+def warning_counts(runs: list[dict]) -> dict[str, int]:
+    """How many runs carry each warning code (a run counts once per code)."""
+    counts: dict[str, int] = {}
+    for r in runs:
+        for code in sorted({w["code"] for w in r.get("warnings") or ()}):  # records from before warnings: none
+            counts[code] = counts.get(code, 0) + 1
+    return counts

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from .adaptation import adaptation_warnings
 from .identification import Identification, identify
 from .metrics import summarize, tracking_error
 from .model import RobotParams
@@ -232,7 +233,23 @@ def _steps(scenario: Scenario) -> dict:
             "divergence_error": sim.divergence_error}
 
 
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta")  #: the logged series summarize() reads
+METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
+
+
+def run_warnings(scenario: Scenario, columns: dict, nmse=None) -> list[dict]:
+    """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: the NN-adaptive
+    controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`; ``nmse``, the
+    emulator's identification NMSE per output, or None)."""
+    return adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse])
+
+
+def run_metrics(scenario: Scenario, columns: dict, *, status: str, failure_time: float | None = None,
+                nmse=None) -> dict:
+    """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings."""
+    sim = scenario.simulation
+    return summarize(columns, status=status, window=sim.window, control_period=sim.control_period,
+                     settling_threshold=sim.settling_threshold, failure_time=failure_time,
+                     warnings=run_warnings(scenario, columns, nmse) if status == "ok" else ())
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
@@ -255,15 +272,15 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
+    nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
     metrics = []
     for i in range(len(status)):
         k = int(failure_index[i])
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
-        metrics.append(summarize({name: value[valid] for name, value in columns.items()},
-                                 status=STATUS_NAMES[int(status[i])], window=sim.window,
-                                 control_period=sim.control_period, settling_threshold=sim.settling_threshold,
-                                 failure_time=None if k < 0 else float(t[k])))
+        metrics.append(run_metrics(scenario, {name: value[valid] for name, value in columns.items()},
+                                   status=STATUS_NAMES[int(status[i])], failure_time=None if k < 0 else float(t[k]),
+                                   nmse=None if nmse is None else nmse[i]))
     return metrics
 
 

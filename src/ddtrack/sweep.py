@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .errors import ConfigError, did_you_mean
+from .metrics import warning_counts
 from .outdir import atomic_write
 from .runner import enable_compilation_cache, monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
@@ -347,8 +348,11 @@ def table(records: Sequence[dict]) -> pa.Table:
         window = metrics.pop("window", None) or [None, None]
         gains = metrics.pop("final_gains", None) or [None, None, None]
         metrics.pop("status", None)
+        warnings = metrics.pop("warnings", None) or []
         row |= metrics | {"window_start": window[0], "window_end": window[1], "final_kx": gains[0],
-                          "final_ky": gains[1], "final_ktheta": gains[2]}
+                          "final_ky": gains[1], "final_ktheta": gains[2],
+                          "warning_codes": ",".join(w["code"] for w in warnings),
+                          "warnings": " | ".join(w["message"] for w in warnings)}
         rows.append(row)
     names: dict[str, None] = {}
     for row in rows:
@@ -380,6 +384,7 @@ class Outcome:
     ran: int  #: records written by this sweep
     errors: int  #: runs with status "error" in the final results
     not_ok: int  #: runs that diverged or went non-finite
+    warnings: dict  #: warning code -> runs that carry it (``metrics.json``'s ``warnings``)
 
 
 def run_sweep(plan: Plan, out: Path, client: Any, *,
@@ -424,7 +429,8 @@ def run_sweep(plan: Plan, out: Path, client: Any, *,
     write_results(out, list(final.values()))
     return Outcome(total=len(plan.runs), reused=len(existing), ran=len(plan.runs) - len(existing),
                    errors=sum(r["status"] == ERROR for r in final.values()),
-                   not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()))
+                   not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()),
+                   warnings=warning_counts([r["metrics"] or {"warnings": []} for r in final.values()]))
 
 
 def local_cluster(workers: int) -> Any:
