@@ -49,12 +49,13 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     enable_compilation_cache()
     from .rundir import write_run
-    from .runner import prepare, run_metrics, run_setup
+    from .runner import prepare, run_metrics, run_setup, traction_columns
     from .sim import REMEDIES, timeseries
 
     setup, draws = prepare(spec)
     result = run_setup(spec, setup, draws)
     columns = timeseries(result)
+    columns |= traction_columns(setup.plant_params, columns)  # the grip the run needed, and its wheel speeds
     sim = spec.simulation
     nmse = None if setup.identification is None else setup.identification.nmse
     metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)

@@ -185,7 +185,8 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
 
 
 def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
-              settling_threshold: float, failure_time: float | None = None, warnings: Sequence[dict] = ()) -> dict:
+              settling_threshold: float, failure_time: float | None = None, warnings: Sequence[dict] = (),
+              floor_friction: float = 0.8) -> dict:
     """The ``metrics.json`` dictionary of a run (DESIGN 4).
 
     Error statistics are over ``window``; settling time, effort and saturation fraction over the
@@ -206,6 +207,8 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
         e_tr [m] below which the run counts as settled.
     failure_time : float, optional
         When a failed run failed [s].
+    floor_friction : float, optional
+        The floor's friction coefficient, against which ``time_above_floor_mu`` counts (``plant.floor_friction``).
     warnings : sequence of dict, optional
         Why the result may not mean what it seems, each ``{"code", "message"}`` (:func:`ddtrack.runner.run_warnings`).
 
@@ -215,7 +218,9 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
         ``status, window, e_tr_mean, e_tr_rms, e_tr_max, e_tr_final`` [m], ``settling_time`` [s] (None if
         never), ``effort`` [N^2 m^2 s] (None without torques), ``saturation_fraction`` [0..1]; ``final_gains``
         (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run; ``warnings``
-        (always present, [] when there are none).
+        (always present, [] when there are none); where the run has ``mu_required`` (a torque-driven plant):
+        ``mu_required_max`` (the friction coefficient the run needed), ``time_above_floor_mu`` [s] and
+        ``wheel_speed_max`` [rad/s], over the whole run.
     """
     metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
     keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
@@ -228,6 +233,11 @@ def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[f
         metrics["settling_time"] = settling_time(t, e_tr, settling_threshold)
         metrics["effort"] = effort(columns["tau_r"], columns["tau_l"], control_period)
         metrics["saturation_fraction"] = saturation_fraction(columns["saturated"]) if "saturated" in columns else 0.0
+        if "mu_required" in columns and len(columns["mu_required"]):
+            mu = np.asarray(columns["mu_required"])
+            metrics["mu_required_max"] = float(np.max(mu))
+            metrics["time_above_floor_mu"] = float(np.count_nonzero(mu > floor_friction) * control_period)
+            metrics["wheel_speed_max"] = float(np.max(np.abs([columns["wheel_speed_r"], columns["wheel_speed_l"]])))
     if all(k in columns for k in ("kx", "ky", "ktheta")) and len(columns["t"]):
         gains = [float(columns[k][-1]) for k in ("kx", "ky", "ktheta")]
         metrics["final_gains"] = gains if all(map(math.isfinite, gains)) else None

@@ -17,10 +17,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ._format import significant
 from .adaptation import adaptation_warnings
 from .identification import Identification, identify
 from .metrics import summarize, tracking_error
-from .model import RobotParams
+from .model import RobotParams, traction
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, vmap_runs
 
@@ -236,20 +237,54 @@ def _steps(scenario: Scenario) -> dict:
 METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
 
 
-def run_warnings(scenario: Scenario, columns: dict, nmse=None) -> list[dict]:
-    """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: the NN-adaptive
-    controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`; ``nmse``, the
-    emulator's identification NMSE per output, or None)."""
-    return adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse])
+def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray]:
+    """``mu_required`` (the friction coefficient the run needed, :mod:`ddtrack.model.traction`) and the wheel speeds
+    ``wheel_speed_r``, ``wheel_speed_l`` [rad/s] of a torque-driven run on the true plant ``params``; none for a
+    velocity-input plant, whose speeds jump by command and whose contact forces mean nothing."""
+    if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
+        return {}
+    geometry = {"mass": float(params.mass), "inertia_axle": float(params.inertia_axle),
+                "com_offset": float(params.com_offset), "half_axle": float(params.half_axle)}
+    right, left = traction.wheel_speeds(columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius),
+                                        half_axle=float(params.half_axle))
+    return {"mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
+            "wheel_speed_r": right, "wheel_speed_l": left}
+
+
+def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
+    """Say when no floor, or not the scenario's (``plant.floor_friction``), could give the grip the run needed."""
+    needed, floor = metrics.get("mu_required_max"), scenario.plant.floor_friction
+    if needed is None or needed <= floor:
+        return []
+    above = f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
+    if needed > traction.MAX_FLOOR_FRICTION:
+        return [{"code": "friction_beyond_any_floor", "message": (
+            f"the run needed a friction coefficient of {significant(needed)} ({above}); no real floor gives more than "
+            f"about {traction.MAX_FLOOR_FRICTION:g}, so a real robot would slip: this result is not physically "
+            "possible; lower robot.max_torque, the gains, or the initial error")}]
+    return [{"code": "friction_exceeds_floor", "message": (
+        f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels would "
+        "slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's")}]
+
+
+def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) -> list[dict]:
+    """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: grip no floor could
+    give (:func:`traction_warnings`), and the NN-adaptive controller's adaptation that could not work
+    (:func:`ddtrack.adaptation.adaptation_warnings`; ``nmse``, the emulator's identification NMSE per output, or
+    None)."""
+    return [*traction_warnings(scenario, metrics),
+            *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse])]
 
 
 def run_metrics(scenario: Scenario, columns: dict, *, status: str, failure_time: float | None = None,
                 nmse=None) -> dict:
     """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings."""
     sim = scenario.simulation
-    return summarize(columns, status=status, window=sim.window, control_period=sim.control_period,
-                     settling_threshold=sim.settling_threshold, failure_time=failure_time,
-                     warnings=run_warnings(scenario, columns, nmse) if status == "ok" else ())
+    metrics = summarize(columns, status=status, window=sim.window, control_period=sim.control_period,
+                        settling_threshold=sim.settling_threshold, failure_time=failure_time,
+                        floor_friction=scenario.plant.floor_friction)
+    metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse) if status == "ok" else []
+    return metrics
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
@@ -257,7 +292,8 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
-    series = {"e_xy": result.error[..., :2]}  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
+    series = {"e_xy": result.error[..., :2],  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
+              "v": result.state[..., 3], "omega": result.state[..., 4]}  # for the grip the run needed
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
     return series, result.status, result.failure_index
 
@@ -278,7 +314,10 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
         k = int(failure_index[i])
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
-        metrics.append(run_metrics(scenario, {name: value[valid] for name, value in columns.items()},
+        columns = {name: value[valid] for name, value in columns.items()}
+        columns |= traction_columns(jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params),
+                                    columns)
+        metrics.append(run_metrics(scenario, columns,
                                    status=STATUS_NAMES[int(status[i])], failure_time=None if k < 0 else float(t[k]),
                                    nmse=None if nmse is None else nmse[i]))
     return metrics

@@ -149,6 +149,9 @@ class PlantConfig(_Section):
     viscous_friction: NonNegative | None = Field(None, description="True viscous wheel friction b_w [N m s/rad].")
     coulomb_friction: NonNegative | None = Field(None, description="True Coulomb wheel friction tau_c [N m].")
     friction_smoothing: Positive | None = Field(None, description="tanh smoothing wheel speed eps_f [rad/s].")
+    floor_friction: Positive = Field(0.8, le=3.0, description=(
+        "Friction coefficient of the floor (tyre on floor, 0.3 to 1.0 indoors): a run that needs more grip is "
+        "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor)."))
 
 
 class ParameterDraw(_Section):
@@ -827,7 +830,8 @@ class Scenario(_Section):
 
     def plant_params(self) -> RobotParams:
         """The true plant's nominal values: [plant] over [robot]."""
-        merged = self.robot.model_dump() | {k: v for k, v in self.plant.model_dump().items() if v is not None}
+        true = self.plant.model_dump(exclude={"floor_friction"})  # the floor is not the robot's
+        merged = self.robot.model_dump() | {k: v for k, v in true.items() if v is not None}
         return RobotParams(**merged)
 
 
