@@ -62,7 +62,7 @@ def test_timeseries_columns_and_types(paper_line_run):
 def test_metrics_json(paper_line_run):
     _, out = paper_line_run
     metrics = json.loads((out / "metrics.json").read_text())
-    assert METRIC_KEYS | {"final_gains"} == set(metrics)
+    assert METRIC_KEYS | {"final_gains", "warnings", "mu_required_max", "time_above_floor_mu", "wheel_speed_max"} == set(metrics)
     assert metrics["status"] == "ok" and metrics["window"] == [20.0, 40.0]
     assert metrics["final_gains"] == [1.0, 55.0, 15.0]
     # SPEC 4.5: under the paper's mismatch, backstepping's steady error is of the order F0/(m k_cv Kx) = 0.046 m

@@ -259,9 +259,9 @@ def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
     above = f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
     if needed > traction.MAX_FLOOR_FRICTION:
         return [{"code": "friction_beyond_any_floor", "message": (
-            f"the run needed a friction coefficient of {significant(needed)} ({above}); no real floor gives more than "
-            f"about {traction.MAX_FLOOR_FRICTION:g}, so a real robot would slip: this result is not physically "
-            "possible; lower robot.max_torque, the gains, or the initial error")}]
+            f"the run needed a friction coefficient of {significant(needed)} ({above}); robot wheels get at most about "
+            f"{traction.MAX_FLOOR_FRICTION:g} from real floors, so a real robot would slip: this result is not "
+            "physically possible; lower robot.max_torque, the gains, or the initial error")}]
     return [{"code": "friction_exceeds_floor", "message": (
         f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels would "
         "slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's")}]

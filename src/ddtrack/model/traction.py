@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 GRAVITY = 9.80665  #: standard gravity [m/s^2]
-#: rubber on the grippiest indoor floor (carpet); dry concrete gives about 1.0 (docs/guide.md cites the sources)
+#: an assumed, generous upper bound for robot wheels on real floors: rubber on dry concrete is about 1.0 static,
+#: 0.6-0.85 sliding (sources in docs/guide.md, "Run folder")
 MAX_FLOOR_FRICTION = 1.7
 
 
