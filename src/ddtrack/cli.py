@@ -49,8 +49,9 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     enable_compilation_cache()
     from .rundir import write_run
+    from .feasibility import check
     from .runner import prepare, run_metrics, run_setup, traction_columns
-    from .sim import REMEDIES, timeseries
+    from .sim import remedy, timeseries
 
     setup, draws = prepare(spec)
     result = run_setup(spec, setup, draws)
@@ -59,6 +60,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     sim = spec.simulation
     nmse = None if setup.identification is None else setup.identification.nmse
     metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
+    metrics["warnings"] = [*check(spec), *metrics["warnings"]]  # the scenario's own, then the run's
     identification = None
     if setup.identification is not None:
         found = setup.identification
@@ -70,7 +72,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
                f"{sim.duration:g} s -> {folder}")
     if result.status_name != "ok":
-        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {REMEDIES[result.status_name]}",
+        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {remedy(result.status_name, columns)}",
                    err=True)
         return 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
@@ -104,9 +106,13 @@ def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
     """Check SCENARIO without running it."""
     from .scenario import load_scenario
 
+    from .feasibility import check
+
     spec = load_scenario(scenario, overrides=overrides)
     click.echo(f"ok: {spec.name} ({spec.trajectory.kind}, {spec.controller.kind}, "
                f"{spec.simulation.n_steps} control periods)")
+    for warning in check(spec):
+        click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
     return 0
 
 

@@ -970,9 +970,13 @@ def validate_scenario(data: dict[str, Any], *, base_dir: Path = Path(".")) -> Sc
     try:
         # JSON mode + strict: TOML arrays become tuples, ints become floats, but "10" and true are not numbers
         text = json.dumps(data, default=str, allow_nan=True)
-        return Scenario.model_validate_json(text, strict=True, context={"base_dir": str(base_dir)})
+        scenario = Scenario.model_validate_json(text, strict=True, context={"base_dir": str(base_dir)})
     except ValidationError as exc:
         raise _config_error(exc) from None
+    from .feasibility import check
+
+    check(scenario)  # a reference beyond the clamps, degrees for radians, grams for kilograms: refused here
+    return scenario
 
 
 def apply_override(data: dict[str, Any], override: str) -> None:

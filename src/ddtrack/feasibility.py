@@ -1,0 +1,92 @@
+"""Scenarios that cannot mean what they say, caught when they are loaded.
+
+:func:`check` refuses (with :class:`ConfigError`, exit code 2) a reference the robot cannot follow because it asks
+for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a robot clamped at 0.22 m/s ran "ok" with
+1.89 m of error), an angle beyond 2 pi (``heading = 45`` is almost surely degrees; it ran as a 58.3 deg line), and
+masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams). It returns
+warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .errors import ConfigError
+
+NEAR_LIMIT = 0.9  #: a reference above this fraction of a clamp leaves the feedback no room: warned
+MAX_SAMPLES = 20_001
+#: radius of gyration sqrt(I / m) against the half axle L: a robot's body lies within about 0.2 to 2 L; outside
+#: [1/20, 20] L the units are wrong (a mass in grams makes it 30 times too small)
+GYRATION_RANGE = (0.05, 20.0)
+
+
+def reference_peaks(trajectory: Any, duration: float, control_period: float) -> tuple[float, float]:
+    """Largest |v_r| [m/s] and |omega_r| [rad/s] of ``trajectory`` sampled every control period over the run."""
+    import jax
+
+    samples = min(MAX_SAMPLES, int(duration / control_period) + 1)
+    reference = jax.vmap(trajectory)(np.linspace(0.0, duration, samples))
+    return float(np.max(np.abs(reference.v))), float(np.max(np.abs(reference.omega)))
+
+
+def _speed_field(scenario: Any) -> str:
+    return "trajectory.speed" if "speed" in type(scenario.trajectory).model_fields else "trajectory"
+
+
+def check_clamps(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
+    """Refuse a reference at or above the controller's clamps; warn within 10 % of them."""
+    controller, warnings = scenario.controller, []
+    limits = (getattr(controller, "max_velocity", None), getattr(controller, "max_yaw_rate", None))
+    names = (("speed", "m/s", "controller.max_velocity", _speed_field(scenario)),
+             ("yaw rate", "rad/s", "controller.max_yaw_rate", "trajectory"))
+    for peak, limit, (what, unit, clamp, field) in zip(peaks, limits, names, strict=True):
+        if limit is None:
+            continue
+        if peak >= limit:
+            hint = (f"slow the reference below {NEAR_LIMIT * limit:.3g} {unit}, or raise {clamp} to what your robot "
+                    "can really do")
+            if what == "speed" and peak / 3.6 < limit:
+                hint += f" (if {peak:g} was meant in km/h, that is {peak / 3.6:.3g} m/s)"
+            raise ConfigError(field, f"the reference's {what} reaches {peak:.3g} {unit}, at or above {clamp} = "
+                              f"{limit:g} {unit}: the robot cannot follow it and would run saturated, off the path",
+                              hint)
+        if peak > NEAR_LIMIT * limit:
+            warnings.append({"code": "reference_near_limit", "message": (
+                f"the reference's {what} reaches {peak:.3g} {unit}, {100 * peak / limit:.3g} % of {clamp} = "
+                f"{limit:g} {unit}: little is left for the feedback to correct errors")})
+    return warnings
+
+
+def check_angles(scenario: Any) -> None:
+    """Refuse an angle beyond 2 pi, naming it in degrees and radians."""
+    angles = []
+    if "heading" in type(scenario.trajectory).model_fields:
+        angles.append(("trajectory.heading", scenario.trajectory.heading))
+    if scenario.initial.pose is not None:
+        angles.append(("initial.pose[2]", scenario.initial.pose[2]))
+    for field, angle in angles:
+        if abs(angle) > 2.0 * math.pi:
+            raise ConfigError(field, f"{angle:g} rad is more than a full turn: angles are in radians",
+                              f"if you meant {angle:g} degrees, write {math.radians(angle):.10g}")
+
+
+def check_units(scenario: Any) -> None:
+    """Refuse a mass and inertia whose radius of gyration is far off the robot's size (units mixed up)."""
+    for section, params in (("robot", scenario.robot.params()), ("plant", scenario.plant_params())):
+        gyration = math.sqrt(params.inertia / params.mass) / params.half_axle
+        if not GYRATION_RANGE[0] <= gyration <= GYRATION_RANGE[1]:
+            raise ConfigError(f"{section}.mass", (
+                f"{params.mass:g} kg with inertia {params.inertia:g} kg m^2 gives a radius of gyration "
+                f"{math.sqrt(params.inertia / params.mass):.3g} m, {gyration:.3g} times the half axle "
+                f"{params.half_axle:g} m; a robot's lies within about 0.2 to 2 times"),
+                "masses are in kg (not g) and inertias in kg m^2 (about m (0.5 L)^2 for a compact robot)")
+
+
+def check(scenario: Any) -> list[dict]:
+    """Run every check on a validated scenario; return the warnings (raise :class:`ConfigError` on a refusal)."""
+    check_angles(scenario)
+    check_units(scenario)
+    sim = scenario.simulation
+    return check_clamps(scenario, reference_peaks(scenario.trajectory.build(), sim.duration, sim.control_period))

@@ -1,0 +1,63 @@
+"""Scenarios that cannot mean what they say are refused when loaded (exit 2, naming the field and the numbers),
+and a failed run's remedy names its cause."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import ddtrack
+from ddtrack.errors import ConfigError
+from ddtrack.sim import remedy
+
+from conftest import SCENARIOS
+
+
+def test_a_reference_faster_than_the_clamp_is_refused(cli):
+    # a 1 m/s circle for a Burger clamped at 0.22 m/s ran "ok" with 1.89 m of error before
+    code, _, stderr = cli("validate", SCENARIOS / "burger_20hz.toml", "--set", "trajectory.speed=1")
+    assert code == 2 and "Traceback" not in stderr
+    assert "trajectory.speed" in stderr and "1 m/s" in stderr and "controller.max_velocity = 0.22" in stderr
+
+
+def test_a_speed_in_km_per_hour_gets_the_conversion():
+    with pytest.raises(ConfigError, match=r"meant in km/h, that is 0\.139 m/s"):
+        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["trajectory.speed=0.5"])
+
+
+def test_a_yaw_rate_beyond_the_clamp_is_refused():
+    with pytest.raises(ConfigError, match="yaw rate.*controller.max_yaw_rate"):
+        ddtrack.load_scenario(SCENARIOS / "circle.toml", overrides=["controller.max_yaw_rate=0.1"])
+
+
+def test_an_angle_in_degrees_is_refused_with_its_radians(cli):
+    code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--set", "trajectory.heading=45")
+    assert code == 2 and "trajectory.heading" in stderr and f"{math.radians(45):.10g}" in stderr
+    with pytest.raises(ConfigError, match=r"initial.pose\[2\]"):
+        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=["initial.pose=[0, 10, 90]"])
+
+
+def test_a_mass_in_grams_is_refused():
+    with pytest.raises(ConfigError, match="robot.mass.*radius of gyration"):
+        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["robot.mass=1000"])
+    with pytest.raises(ConfigError, match="plant.mass"):
+        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["plant.mass=1000"])
+
+
+def test_a_reference_near_the_clamp_is_warned(cli):
+    code, _, stderr = cli("validate", SCENARIOS / "paper_line.toml", "--set", "trajectory.speed=1.9")
+    assert code == 0 and "[reference_near_limit]" in stderr and "95 %" in stderr
+
+
+@pytest.mark.parametrize("path", sorted(SCENARIOS.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_scenario_is_feasible(path):
+    from ddtrack.feasibility import check
+
+    assert check(ddtrack.load_scenario(path)) == []
+
+
+def test_the_remedy_names_saturation_as_the_cause():
+    saturated = {"saturated": np.r_[np.ones(80), np.zeros(20)]}
+    assert "could not do what the reference asked" in remedy("diverged", saturated)
+    assert "lower the gains" in remedy("diverged", {"saturated": np.zeros(100)})
