@@ -59,5 +59,6 @@ def test_every_shipped_scenario_is_feasible(path):
 
 def test_the_remedy_names_saturation_as_the_cause():
     saturated = {"saturated": np.r_[np.ones(80), np.zeros(20)]}
+    assert "lower the gains" in remedy("diverged", {"saturated": np.ones(3)})  # failed at once: no evidence
     assert "could not do what the reference asked" in remedy("diverged", saturated)
     assert "lower the gains" in remedy("diverged", {"saturated": np.zeros(100)})

@@ -77,7 +77,7 @@ def check_units(scenario: Any) -> None:
     for section, params in (("robot", scenario.robot.params()), ("plant", scenario.plant_params())):
         gyration = math.sqrt(params.inertia / params.mass) / params.half_axle
         if not GYRATION_RANGE[0] <= gyration <= GYRATION_RANGE[1]:
-            raise ConfigError(f"{section}.mass", (
+            raise ConfigError(f"{section}.mass, {section}.inertia", (
                 f"{params.mass:g} kg with inertia {params.inertia:g} kg m^2 gives a radius of gyration "
                 f"{math.sqrt(params.inertia / params.mass):.3g} m, {gyration:.3g} times the half axle "
                 f"{params.half_axle:g} m; a robot's lies within about 0.2 to 2 times"),

@@ -23,7 +23,8 @@ def remedy(status: str, columns: dict) -> str:
     :func:`timeseries` up to the failure): a run that spent most of its time against the torque limit or a clamp
     failed because the robot could not do what was asked, not because of its gains."""
     saturated = columns.get("saturated")  # absent for a controller that logs no saturation
-    if status == "diverged" and saturated is not None and len(saturated) and np.mean(saturated > 0.5) >= 0.5:
+    # over at least 20 periods: a run that fails at once says nothing by its saturation
+    if status == "diverged" and saturated is not None and len(saturated) >= 20 and np.mean(saturated > 0.5) >= 0.5:
         return (f"the torque limit or a velocity clamp acted in {100 * np.mean(saturated > 0.5):.3g} % of the periods "
                 "before it: the robot could not do what the reference asked; slow the reference, raise "
                 "robot.max_torque or the controller's clamps if the robot allows, or start closer to the reference")
