@@ -156,7 +156,7 @@ def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, c
     sim = scenario.simulation
     plant = setup.plant
     options = dict(n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
-                   disturbance=setup.disturbance, noise=setup.noise, divergence_error=sim.divergence_error)
+                   disturbance=setup.disturbance, noise=setup.noise, divergence_error=scenario.divergence_distance())
     x0 = jnp.asarray(setup.x0)
 
     def simulate_only():

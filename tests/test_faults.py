@@ -101,7 +101,8 @@ def test_control_period_too_long_diverges(tmp_path, cli):
 
 
 def test_initial_pose_beyond_the_divergence_bound_diverges_at_once(tmp_path, cli):
-    out, code, stderr = run_cli(cli, tmp_path, "initial.pose=[0, 100, 0]")  # 70.7 m off the line y = x > 50 m
+    # 70.7 m off the line y = x, beyond a fixed 50 m bound (the default bound scales with the initial error)
+    out, code, stderr = run_cli(cli, tmp_path, "initial.pose=[0, 100, 0]", "simulation.divergence_error=50")
     columns = assert_failed_run(out, code, stderr, "diverged", 0.0)
     assert len(columns["t"]) == 1 and columns["y"][0] == 100.0
 
@@ -201,3 +202,14 @@ def test_sweep_carries_on_past_an_unstable_value(tmp_path, cli):
             assert record["metrics"][name] == expected, name  # the same chunk shape: the same bits
     table = pq.read_table(out / "results.parquet")
     assert sorted(table.column("status").to_pylist()) == ["diverged", "diverged", "ok", "ok"]
+
+
+def test_the_default_divergence_bound_scales_with_the_scenario():
+    # 3 (initial error + the reference's extent + 2 L): the paper's line (10 m from the reference point at t = 0,
+    # 20 m long, L = 0.25 m) and a Burger's 0.5 m circle, which a fixed 50 m bound would have let wander 50 m
+    line = ddtrack.load_scenario(SCENARIOS / "paper_line.toml")
+    assert line.divergence_distance() == pytest.approx(3 * (10.0 + 20.0 + 0.5), rel=1e-6)
+    burger = ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml")
+    assert 2.0 < burger.divergence_distance() < 6.0
+    fixed = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=["simulation.divergence_error=50"])
+    assert fixed.divergence_distance() == 50.0

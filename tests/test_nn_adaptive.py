@@ -98,7 +98,7 @@ def simulate_unbatched(scenario, setup, draws):
     return ddtrack.timeseries(simulate(setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
                                        n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
                                        disturbance=setup.disturbance, noise=setup.noise,
-                                       divergence_error=sim.divergence_error))
+                                       divergence_error=scenario.divergence_distance()))
 
 
 @pytest.mark.parametrize("identification", [False, True], ids=["untrained", "identified"])

@@ -22,13 +22,30 @@ MAX_SAMPLES = 20_001
 GYRATION_RANGE = (0.05, 20.0)
 
 
-def reference_peaks(trajectory: Any, duration: float, control_period: float) -> tuple[float, float]:
-    """Largest |v_r| [m/s] and |omega_r| [rad/s] of ``trajectory`` sampled every control period over the run."""
+def sample_reference(trajectory: Any, duration: float, control_period: float) -> Any:
+    """The reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
     import jax
 
     samples = min(MAX_SAMPLES, int(duration / control_period) + 1)
-    reference = jax.vmap(trajectory)(np.linspace(0.0, duration, samples))
+    return jax.tree_util.tree_map(np.asarray, jax.vmap(trajectory)(np.linspace(0.0, duration, samples)))
+
+
+def reference_peaks(trajectory: Any, duration: float, control_period: float) -> tuple[float, float]:
+    """Largest |v_r| [m/s] and |omega_r| [rad/s] of ``trajectory`` sampled every control period over the run."""
+    reference = sample_reference(trajectory, duration, control_period)
     return float(np.max(np.abs(reference.v))), float(np.max(np.abs(reference.omega)))
+
+
+def divergence_bound(scenario: Any) -> float:
+    """The tracking error [m] beyond which a run has diverged, scaled with the scenario: 3 (e_0 + extent + 2 L),
+    e_0 the initial distance to the reference, extent the farthest the reference goes from its start, L the half
+    axle. A fixed 50 m let a Burger on a 0.5 m circle wander 50 m before it counted as lost."""
+    sim = scenario.simulation
+    reference = sample_reference(scenario.trajectory.build(), sim.duration, sim.control_period)
+    start = scenario.initial.pose if scenario.initial.pose is not None else (reference.x[0], reference.y[0])
+    initial = math.hypot(start[0] - reference.x[0], start[1] - reference.y[0])
+    extent = float(np.max(np.hypot(reference.x - reference.x[0], reference.y - reference.y[0])))
+    return 3.0 * (initial + extent + 2.0 * scenario.plant_params().half_axle)
 
 
 def _speed_field(scenario: Any) -> str:

@@ -231,7 +231,7 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
 def _steps(scenario: Scenario) -> dict:
     sim = scenario.simulation
     return {"n_steps": sim.n_steps, "control_period": sim.control_period, "substeps": sim.substeps,
-            "divergence_error": sim.divergence_error}
+            "divergence_error": scenario.divergence_distance()}
 
 
 METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read

@@ -86,7 +86,9 @@ class SimulationConfig(_Section):
                                                          "default the whole run.")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Seed of every random draw of the run.")
     settling_threshold: Positive = Field(0.1, description="e_tr below which the run counts as settled [m].")
-    divergence_error: Positive = Field(50.0, description="Tracking error at which a run is declared diverged [m].")
+    divergence_error: Positive | None = Field(None, description=(
+        "Tracking error at which a run is declared diverged [m]; default 3 (initial error + the reference's extent "
+        "+ 2 L), which scales with the scenario (91.5 m for the paper's line, 3.8 m for a Burger's 0.5 m circle)."))
 
     @model_validator(mode="after")
     def _consistent(self) -> SimulationConfig:
@@ -827,6 +829,15 @@ class Scenario(_Section):
                 raise FieldError(f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); "
                                  "use a smaller spread")
         return self
+
+    def divergence_distance(self) -> float:
+        """``simulation.divergence_error``, or the bound that scales with the scenario
+        (:func:`ddtrack.feasibility.divergence_bound`) [m]."""
+        if self.simulation.divergence_error is not None:
+            return self.simulation.divergence_error
+        from .feasibility import divergence_bound
+
+        return divergence_bound(self)
 
     def plant_params(self) -> RobotParams:
         """The true plant's nominal values: [plant] over [robot]."""

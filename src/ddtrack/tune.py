@@ -48,6 +48,7 @@ class Problem(NamedTuple):
     scenario: Scenario
     setup: object
     draws: object
+    divergence_error: float  #: [m], :meth:`Scenario.divergence_distance`, found before any tracing
 
 
 class TuneResult(NamedTuple):
@@ -67,7 +68,8 @@ def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Proble
         if scenario.controller.kind not in TUNABLE:
             raise ConfigError("--controller", f"'{scenario.controller.kind}' has no tunable gains here",
                               f"tune one of: {', '.join(TUNABLE)}")
-    return [Problem(scenario, *prepare_batch(scenario, list(seeds))) for scenario in scenarios]
+    return [Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
+            for scenario in scenarios]
 
 
 def rollout_loss(problem: Problem, gains: jax.Array, gamma: jax.Array, effort_weight: float,
@@ -82,7 +84,7 @@ def rollout_loss(problem: Problem, gains: jax.Array, gamma: jax.Array, effort_we
     result = simulate_batch(DynamicPlant(problem.setup.plant_params), dataclasses.replace(controller, outer=outer),
                             problem.setup.trajectory, problem.setup.x0, problem.draws, problem.setup.disturbance,
                             problem.setup.noise, n_steps=sim.n_steps, control_period=sim.control_period,
-                            substeps=sim.substeps, divergence_error=sim.divergence_error)
+                            substeps=sim.substeps, divergence_error=problem.divergence_error)
     t = np.arange(sim.n_steps) * sim.control_period
     counted = np.ones(sim.n_steps) if whole_run else window_mask(t, sim.window).astype(float)
     per_period = 0.5 * jnp.sum(gamma * result.error**2, axis=-1) + effort_weight * jnp.sum(result.control**2, axis=-1)

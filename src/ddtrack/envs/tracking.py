@@ -229,7 +229,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             self.gain_min = np.minimum(np.asarray(bounds[0], float), anchor)
             self.gain_max = np.maximum(np.asarray(bounds[1], float), anchor)
             self.gain_anchor = anchor
-        distance, speed = sim.divergence_error, DIVERGENCE_SPEED
+        distance, speed = self.scenario.divergence_distance(), DIVERGENCE_SPEED
         low = [-distance, -distance, -1.0, -1.0, -speed, -speed, -speed, -speed]
         high = [distance, distance, 1.0, 1.0, speed, speed, speed, speed]
         if self._gains_mode:
