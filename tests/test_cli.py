@@ -205,7 +205,7 @@ def test_an_overlaid_path_keeps_the_title(paper_line_run):
     columns = {name: table.column(name).to_numpy() for name in table.column_names}
     fig = plot_path(columns, title="Case 1")
     plot_path(columns, ax=fig.axes[0], label="again", reference=False)
-    assert fig.axes[0].get_title() == "Case 1"
+    assert fig.get_suptitle() == "Case 1"
     assert [line.get_label() for line in fig.axes[0].lines][-1] == "again"
 
 

@@ -357,7 +357,8 @@ def plot_distributions(groups: Mapping[str, Sequence[float]], ax: plt.Axes | Non
 
 # --- run folder ----------------------------------------------------------------------------------------------
 
-SERIES = ("t", "x", "y", "theta", "x_ref", "y_ref", "theta_ref", "e_x", "e_y", "e_theta", "e_tr", "tau_r", "tau_l")
+SERIES = ("t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref", "e_x", "e_y",
+          "e_theta", "e_tr", "tau_r", "tau_l")
 
 
 def _scenario_section(text: str, data: Mapping[str, Any], path: str) -> Section:
@@ -421,8 +422,9 @@ def _run_page(folder: Path) -> dict:
     figures = [Figure("fig-path", "Path in the plane: the robot against the reference (dashed).",
                       svg(plot_path(decimate(columns, ("x", "y", "x_ref", "y_ref"))), "path",
                           "path in the plane")),
-               Figure("fig-states", "x, y and θ against time, with the reference (dashed).",
-                      svg(plot_states(decimate(columns, ("x", "y", "theta", "x_ref", "y_ref", "theta_ref"))),
+               Figure("fig-states", "x, y, θ, v and ω against time, with the reference (dashed).",
+                      svg(plot_states(decimate(columns, ("x", "y", "theta", "v", "omega", "x_ref", "y_ref",
+                                                         "theta_ref", "v_ref", "omega_ref"))),
                           "states", "states against time")),
                Figure("fig-errors", "Posture errors and e_tr; the metric window is shaded.",
                       svg(plot_errors(decimate(columns, ("e_x", "e_y", "e_theta", "e_tr")), window=window),

@@ -46,14 +46,16 @@ def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray
         put("identification.json",
             lambda f: f.write((json.dumps(identification, indent=2, allow_nan=False) + "\n").encode()))
     window = tuple(metrics["window"])
+    title = f"{scenario.name}: {scenario.controller.kind} on {scenario.trajectory.kind}"
     figures = {
-        "path.png": plot_path(columns, title=scenario.name),
-        "states.png": plot_states(columns),
-        "errors.png": plot_errors(columns, window=window),
-        "torques.png": plot_torques(columns, max_torque=scenario.plant_params().max_torque),
+        "path.png": plot_path(columns, title=title),
+        "states.png": plot_states(columns, title=title),
+        "errors.png": plot_errors(columns, window=window, title=title),
     }
+    if not np.all(np.isnan(columns["tau_r"])):  # a velocity-input (kinematic) plant has no torques to show
+        figures["torques.png"] = plot_torques(columns, max_torque=scenario.plant_params().max_torque, title=title)
     if any(name in columns and np.ptp(columns[name]) > 0 for name in ("kx", "ky", "ktheta")):
-        figures["gains.png"] = plot_gains(columns)  # gains that moved (the paper's Figs. 13 and 17)
+        figures["gains.png"] = plot_gains(columns, title=title)  # gains that moved (the paper's Figs. 13 and 17)
     for name, fig in figures.items():
         put(f"figures/{name}", lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
         plt.close(fig)
