@@ -68,3 +68,15 @@ def test_run_figures_are_titled_and_a_kinematic_run_has_no_torques(tmp_path, cli
                      "--set", "simulation.duration=2", "--set", "simulation.metric_window=[0, 2]", "--out", out)
     assert code == 0
     assert sorted(p.name for p in (out / "figures").iterdir()) == ["errors.png", "path.png", "states.png"]
+
+
+def test_help_shows_every_command_summary_whole():
+    from click.testing import CliRunner
+
+    from ddtrack.cli import cli
+
+    text = CliRunner().invoke(cli, ["--help"], terminal_width=80).output
+    listed = " ".join(text.split("Commands:")[1].split())
+    for name, command in cli.commands.items():
+        summary = command.get_short_help_str(limit=10_000)
+        assert not summary.endswith("...") and summary.endswith(".") and f"{name} {summary}" in listed, summary

@@ -23,13 +23,13 @@ overwrite_option = click.option(
     help="Replace another ddtrack command's output (or, for sweep and bench, another study) in --out, whole.")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="ddtrack")
 def cli() -> None:
     """Simulate, compare and tune trajectory-tracking controllers for differential-drive robots."""
 
 
-@cli.command()
+@cli.command(short_help='Simulate SCENARIO once and write a run folder.')
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("--controller", "controller", metavar="NAME", help="Replace controller.kind (see `ddtrack list`).")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
@@ -50,11 +50,15 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     enable_compilation_cache()
     from .rundir import write_run
     from .feasibility import check
-    from .runner import prepare, run_metrics, run_setup, traction_columns
+    from .runner import needs_identification, prepare, run_metrics, run_setup, traction_columns
     from .sim import remedy, timeseries
 
+    show = terminal_status()
+    show("identifying the robot: the NN emulator's pre-training run" if needs_identification(spec) else "preparing")
     setup, draws = prepare(spec)
+    show(f"simulating {spec.simulation.duration:g} s")
     result = run_setup(spec, setup, draws)
+    show("writing the run folder and its figures")
     columns = timeseries(result)
     columns |= traction_columns(setup.plant_params, columns)  # the grip the run needed, and its wheel speeds
     sim = spec.simulation
@@ -69,6 +73,7 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
                           "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True))}
     with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
         write_run(stage, spec, columns, metrics, identification)
+    show("")
     click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
                f"{sim.duration:g} s -> {folder}")
     if result.status_name != "ok":
@@ -91,6 +96,18 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     return 0
 
 
+def terminal_status() -> Callable[[str], None]:
+    """A one-line status on stderr, rewritten in place, for the slow phases of a lone run (an NN identification
+    takes seconds); silent when stderr is not a terminal, so pipes, logs and tests see the plain output."""
+    if not sys.stderr.isatty():
+        return lambda text: None
+
+    def show(text: str) -> None:
+        click.echo(f"\r\033[K{text + ' ...' if text else ''}", err=True, nl=False)
+
+    return show
+
+
 def folder_name(name: str) -> str:
     """``name`` as one safe folder name for the default ``runs/NAME``: every character other than a letter, a digit,
     ``.``, ``_`` or ``-`` becomes ``_`` and leading dots go, so a scenario named ``../../etc`` or ``a/b`` cannot
@@ -99,7 +116,7 @@ def folder_name(name: str) -> str:
     return safe or "run"
 
 
-@cli.command()
+@cli.command(short_help='Check SCENARIO without running it.')
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a value first.")
 def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
@@ -116,7 +133,7 @@ def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
     return 0
 
 
-@cli.command(name="list")
+@cli.command(name="list", short_help='List the controllers, trajectories and disturbances.')
 @click.argument("what", required=False, type=click.Choice(LISTS))
 def list_(what: str | None) -> int:
     """List the controllers, trajectories and disturbances a scenario can name."""
@@ -131,7 +148,7 @@ def list_(what: str | None) -> int:
     return 0
 
 
-@cli.command()
+@cli.command(short_help="The paper's Table 1 and Figs. 10-17, over seeds, with intervals.")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/reproduce"), show_default=True,
               help="Folder for table1.{md,csv,json} and figures/.")
 @click.option("--seeds", type=click.IntRange(min=1, max=1000), default=5, show_default=True,
@@ -163,7 +180,7 @@ def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
     return 0
 
 
-@cli.command()
+@cli.command(short_help='Monte Carlo: N seeds per controller, on common random numbers.')
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("-n", "n", type=click.IntRange(min=1, max=1_000_000), required=True, help="Runs per controller.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="First seed.")
@@ -210,7 +227,7 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
     return 0
 
 
-@cli.command()
+@cli.command(short_help="Tune a controller's gains by gradient descent through rollouts.")
 @click.argument("scenarios", nargs=-1, required=True, metavar="SCENARIO...", type=click.Path(path_type=Path))
 @click.option("--controller", default="backstepping", show_default=True, metavar="NAME",
               help="The controller whose constant gains are tuned.")
@@ -277,7 +294,7 @@ def cluster_options(command: Callable) -> Callable:
     return command
 
 
-@cli.command()
+@cli.command(short_help='Run a parameter sweep (SWEEP.toml) on Dask, resumably.')
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
@@ -310,7 +327,7 @@ def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, s
     return 1 if outcome.errors or outcome.not_ok else 0
 
 
-@cli.command()
+@cli.command(short_help='Rank controllers over trajectories, uncertainty levels and seeds.')
 @click.option("--suite", "suite_name", type=click.Choice(["quick", "standard"]), default="quick", show_default=True,
               help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds.")
 @click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
@@ -343,7 +360,7 @@ def bench(suite_name: str, controllers: str | None, out: Path, overwrite: bool, 
     return 1 if summary["errors"] else 0
 
 
-@cli.command()
+@cli.command(short_help='Animate a run folder: the robot following its reference.')
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), metavar="FILE",
               help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH) [default: DIR/animation.gif].")
@@ -368,7 +385,7 @@ def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
     return 0
 
 
-@cli.command()
+@cli.command(short_help='Print the JSON Schema (or Markdown reference) of scenario files.')
 @click.option("--markdown", is_flag=True, help="Print the Markdown reference (docs/reference.md) instead.")
 def schema(markdown: bool) -> int:
     """Print the JSON Schema of scenario files (every key, its type, default, bounds and unit)."""
@@ -380,7 +397,7 @@ def schema(markdown: bool) -> int:
     return 0
 
 
-@cli.command()
+@cli.command(short_help='Write a self-contained HTML report of a result folder.')
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), metavar="FILE", help="The HTML file [default: DIR/report.html].")
 def report(folder: Path, out: Path | None) -> int:

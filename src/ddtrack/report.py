@@ -153,6 +153,10 @@ def detect_kind(folder: Path) -> str:
     for kind, files in KINDS.items():
         if all((folder / name).is_file() for name in files):
             return kind
+    if (folder / "records").is_dir() and (folder / "results.parquet").is_file():  # a sweep has no page of its own
+        raise RunError(f"'{folder}' is a sweep folder (ddtrack sweep): `ddtrack report` renders run, reproduce, mc "
+                       "and bench folders, not sweeps\n  hint: a sweep's results are one row per run in "
+                       f"{folder / 'results.csv'} (and results.parquet); `ddtrack bench` is the sweep with a report")
     expected = "; ".join(f"{DESCRIPTIONS[kind]}: {', '.join(files)}" for kind, files in KINDS.items())
     partial = [kind for kind, files in KINDS.items() if any((folder / name).is_file() for name in files)]
     hint = ""
