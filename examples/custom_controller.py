@@ -1,8 +1,8 @@
 """A custom controller in about twenty lines: an outer velocity law over the shared inner loop.
 
 The law is Kanayama's (paper eq. 12) plus integral action on the along-track error: unmodelled wheel
-friction makes plain backstepping lag its reference by a few centimetres (SPEC 4.5), and the integral
-removes that lag. Its integral lives in ``memory``, which ``command`` returns instead of mutating (DESIGN 3).
+friction makes plain backstepping lag its reference by a few centimetres (model.md §4.5), and the integral
+removes that lag. Its integral lives in ``memory``, which ``command`` returns instead of mutating (docs/architecture.md).
 It is composed with the computed-torque inner loop that the backstepping controllers share and run on the
 paper's straight-line case next to the shipped backstepping, on the same plant and disturbance draws.
 
@@ -38,7 +38,7 @@ class IntegralKanayama:
         return jnp.asarray(0.0)  # the integral of e_x [m s]
 
     def command(self, t, y, ref, memory):
-        e_x, e_y, e_th = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)  # SPEC 2.2
+        e_x, e_y, e_th = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)  # model.md §2.2
         integral = memory + jnp.where(jnp.hypot(e_x, e_y) < self.gate, e_x * self.control_period, 0.0)
         v_c = ref.v * jnp.cos(e_th) + self.kx * e_x + self.ki * integral
         omega_c = ref.omega + ref.v * (self.ky * e_y + self.ktheta * jnp.sin(e_th))

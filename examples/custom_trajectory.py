@@ -1,6 +1,6 @@
 """A custom reference: the lemniscate of Bernoulli, tracked by the shipped backstepping controller.
 
-A trajectory is any pytree with ``__call__(t) -> Reference`` (the Trajectory protocol, SPEC 2.1). Subclassing
+A trajectory is any pytree with ``__call__(t) -> Reference`` (the Trajectory protocol, model.md §2.1). Subclassing
 ``ParametricCurve`` needs only the position: the heading, speed, yaw rate and their derivatives (which the
 computed-torque loop feeds forward) come from forward-mode autodiff of ``position``. The run reuses the
 figure-eight scenario's robot, plant, disturbance, noise and controller with this reference in its place.

@@ -4,7 +4,7 @@ Each seed draws the plant's mass (+-20 %) and viscous wheel friction (+-50 %) un
 section, here given as overrides) along with its disturbance and noise; ``ddtrack.monte_carlo`` runs the seeds
 in vmapped batches and returns one row of metrics per run. The summary: the mean tracking error with its 95 %
 confidence interval (Student t over seeds), and the error by friction tercile (unmodelled friction is what
-makes backstepping lag its reference, SPEC 4.5).
+makes backstepping lag its reference, model.md §4.5).
 
     python examples/monte_carlo.py [--seeds N] [--scenario FILE]
 """

@@ -1,4 +1,4 @@
-"""The ``ddtrack`` command (DESIGN 4). Exit codes: 0 success, 1 a run diverged, 2 usage or configuration error.
+"""The ``ddtrack`` command (docs/guide.md). Exit codes: 0 success, 1 a run diverged, 2 usage or configuration error.
 
 User mistakes print one or two plain lines on stderr, never a traceback.
 """

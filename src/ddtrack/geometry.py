@@ -1,4 +1,4 @@
-"""Planar geometry shared by the model, the controllers and the metrics (SPEC 0, 2.2)."""
+"""Planar geometry shared by the model, the controllers and the metrics (model.md §0, 2.2)."""
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -12,14 +12,14 @@ def wrap_angle(angle: Array) -> Array:
 
 
 def rotation(theta: Array) -> Array:
-    """R_3(theta): body-to-world rotation of a pose increment (SPEC 3.3)."""
+    """R_3(theta): body-to-world rotation of a pose increment (model.md §3.3)."""
     c, s = jnp.cos(theta), jnp.sin(theta)
     zero, one = jnp.zeros_like(theta), jnp.ones_like(theta)
     return jnp.array([[c, -s, zero], [s, c, zero], [zero, zero, one]])
 
 
 def posture_error(x: Array, y: Array, theta: Array, x_r: Array, y_r: Array, theta_r: Array) -> Array:
-    """Kanayama posture error e_p = T_e(theta) (q_r - q), e_theta wrapped (SPEC 2.2; paper eq. 12 corrected).
+    """Kanayama posture error e_p = T_e(theta) (q_r - q), e_theta wrapped (model.md §2.2; paper eq. 12 corrected).
 
     Returns ``[e_x, e_y, e_theta]``: along-track [m] (positive: reference ahead), lateral [m]
     (positive: reference to the robot's left), heading [rad].
@@ -30,7 +30,7 @@ def posture_error(x: Array, y: Array, theta: Array, x_r: Array, y_r: Array, thet
 
 
 def error_rates(error: Array, v: Array, omega: Array, v_r: Array, omega_r: Array) -> Array:
-    """Kanayama error dynamics d/dt [e_x, e_y, e_theta] (SPEC 2.3)."""
+    """Kanayama error dynamics d/dt [e_x, e_y, e_theta] (model.md §2.3)."""
     e_x, e_y, e_theta = error[0], error[1], error[2]
     return jnp.stack([
         omega * e_y - v + v_r * jnp.cos(e_theta),
@@ -40,7 +40,7 @@ def error_rates(error: Array, v: Array, omega: Array, v_r: Array, omega_r: Array
 
 
 def body_increment(pose: Array, next_pose: Array) -> Array:
-    """One-step pose increment in the body frame of ``pose`` (SPEC 3.7, emulator E1 target):
+    """One-step pose increment in the body frame of ``pose`` (model.md §3.7, emulator E1 target):
     [c dx + s dy, -s dx + c dy, wrap(theta' - theta)]."""
     c, s = jnp.cos(pose[2]), jnp.sin(pose[2])
     dx, dy = next_pose[0] - pose[0], next_pose[1] - pose[1]

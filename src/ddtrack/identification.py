@@ -1,4 +1,4 @@
-"""The identification phase of the NN-adaptive controller (SPEC 3.7, "N_c = 100 repeat cycle").
+"""The identification phase of the NN-adaptive controller (model.md §3.7, "N_c = 100 repeat cycle").
 
 Before an experiment, with its own seed: run the fixed-gain backstepping controller on an exciting
 reference with a small command dither on the *true* plant, collect the transitions
@@ -51,7 +51,7 @@ def identification_scale(max_velocity: float, max_yaw_rate: float,
 def exciting_reference(duration: float, control_period: float, scale: tuple[float, float] = (1.0, 1.0)
                        ) -> SampledTrajectory:
     """v_r = k_v (0.5 + 0.3 sin 0.3t + 0.1 sin(1.3t + 1)), omega_r = k_omega (0.4 sin 0.5t + 0.3 sin 1.7t)
-    (SPEC 3.7 at k = 1): speeds in k_v [0.1, 0.9] m/s and yaw rates in k_omega [-0.7, 0.7] rad/s."""
+    (model.md §3.7 at k = 1): speeds in k_v [0.1, 0.9] m/s and yaw rates in k_omega [-0.7, 0.7] rad/s."""
     k_v, k_w = scale
     return unicycle_reference(
         lambda t: k_v * (0.5 + 0.3 * jnp.sin(0.3 * t) + 0.1 * jnp.sin(1.3 * t + 1.0)),
@@ -114,7 +114,7 @@ def identify(plant: RobotParams, inner: object, emulator: Emulator, key: Array, 
              momentum: float = 0.3, clip_norm: float = 5.0, disturbance: WheelDisturbance = WheelDisturbance(),
              noise: MeasurementNoise = MeasurementNoise(), reference_scale: tuple[float, float] = (1.0, 1.0)
              ) -> Identification:
-    """Collect identification data on ``plant`` and train ``emulator`` on it (SPEC 3.7 schedule, step 1);
+    """Collect identification data on ``plant`` and train ``emulator`` on it (model.md §3.7 schedule, step 1);
     ``reference_scale`` is :func:`identification_scale`'s (k_v, k_omega)."""
     k_data, k_train = jax.random.split(key)
     z, targets = collect(plant, inner, emulator, k_data, duration=duration, control_period=control_period,

@@ -1,4 +1,4 @@
-"""Metrics over finished runs (SPEC 4.4; paper eq. 35). Plain NumPy."""
+"""Metrics over finished runs (model.md §4.4; paper eq. 35). Plain NumPy."""
 from __future__ import annotations
 
 import math
@@ -15,7 +15,7 @@ def tracking_error(e_x: np.ndarray, e_y: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     e_x, e_y : ndarray
-        Along-track and lateral posture errors [m] (SPEC 2.2), of one shape.
+        Along-track and lateral posture errors [m] (model.md §2.2), of one shape.
 
     Returns
     -------
@@ -187,7 +187,7 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
 def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
               settling_threshold: float, failure_time: float | None = None, warnings: Sequence[dict] = (),
               floor_friction: float = 0.8) -> dict:
-    """The ``metrics.json`` dictionary of a run (DESIGN 4).
+    """The ``metrics.json`` dictionary of a run (docs/guide.md).
 
     Error statistics are over ``window``; settling time, effort and saturation fraction over the
     whole run. A failed run has every statistic None (JSON null) beside its status and failure time.

@@ -473,7 +473,7 @@ def _gains_section(controller: Mapping[str, Any], final: Sequence[float], column
 
 
 def _max_torque(scenario: Mapping[str, Any]) -> float | None:
-    """The plant's torque limit: a key left out of [plant] takes the [robot] value (DESIGN 4)."""
+    """The plant's torque limit: a key left out of [plant] takes the [robot] value (docs/guide.md)."""
     for section in ("plant", "robot"):
         if section in scenario and "max_torque" in scenario[section]:
             return float(scenario[section]["max_torque"])
@@ -524,7 +524,7 @@ def _reproduce_page(folder: Path) -> dict:
                               "settling [s]", "improvement [%]", "paper [%]"), tuple(rows), left=2, nowrap=2,
                    caption=f"Ours: mean [95 % CI] over {seeds} seed(s); the paper's Table 1 beside it.")
     sections = [Section("table-1", "Table 1, reproduced",
-                        (f"Statistic: mean of e_tr over each case's metric window (SPEC 4.4): {windows}. "
+                        (f"Statistic: mean of e_tr over each case's metric window (model.md §4.4): {windows}. "
                          "Improvement: 100 (E_BS − E_NN) / E_BS, paired by seed.",),
                         tables=(table1,),
                         figures=(Figure("fig-table1", "Mean e_tr: ours (bars: mean over seeds; points: each seed) "

@@ -1,9 +1,9 @@
-"""``ddtrack reproduce``: the paper's Table 1 and Figures 10 to 17 (SPEC 4), over seeds.
+"""``ddtrack reproduce``: the paper's Table 1 and Figures 10 to 17 (model.md §4), over seeds.
 
 Both cases (the shipped ``paper_line`` and ``paper_square`` scenarios, unchanged) are run with
 backstepping and with NN-adaptive backstepping on common random numbers: the same seed gives both
 controllers the same plant, disturbance and noise; only the NN controller's own draws (emulator
-initialisation, identification dither) differ between seeds. The statistic is SPEC 4.4's mean of
+initialisation, identification dither) differ between seeds. The statistic is model.md §4.4's mean of
 e_tr over the case's metric window; the improvement is paired per seed.
 """
 from __future__ import annotations
@@ -131,7 +131,7 @@ def table_markdown(table: dict) -> str:
                 f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'])} | "
                 f"{_fmt(gain) if gain else ''} | "
                 f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |")
-    lines += ["", "Statistic: mean of e_tr over each case's metric window (SPEC 4.4): "
+    lines += ["", "Statistic: mean of e_tr over each case's metric window (model.md §4.4): "
               + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())
               + ". Improvement: 100 (E_BS - E_NN) / E_BS, paired by seed.", ""]
     return "\n".join(lines)

@@ -1,4 +1,4 @@
-"""The run folder (DESIGN 4): ``scenario.toml``, ``timeseries.parquet``, ``metrics.json``, ``figures/``.
+"""The run folder (docs/guide.md): ``scenario.toml``, ``timeseries.parquet``, ``metrics.json``, ``figures/``.
 
 Every file is written under a temporary name in the same folder and renamed into place, so the
 folder never holds a half-written file.

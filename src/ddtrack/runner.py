@@ -1,4 +1,4 @@
-"""Seeds and randomness, single runs, batches and Monte Carlo (DESIGN 3).
+"""Seeds and randomness, single runs, batches and Monte Carlo (docs/architecture.md).
 
 One seed is split, in a fixed order, into streams for the plant-parameter draw, the disturbance,
 the measurement noise and the controller. So swapping the controller leaves the plant and its
@@ -84,7 +84,7 @@ def controller_keys(seed: int) -> tuple[jax.Array, jax.Array, jax.Array]:
 
 
 def needs_identification(scenario: Scenario) -> bool:
-    """True for an NN-adaptive controller whose emulator is pre-trained on an identification run (SPEC 3.7)."""
+    """True for an NN-adaptive controller whose emulator is pre-trained on an identification run (model.md §3.7)."""
     return isinstance(scenario.controller, NNAdaptiveConfig) and scenario.controller.identification
 
 
@@ -105,7 +105,7 @@ def prepare(scenario: Scenario, *, seed: int | None = None, identification: Iden
     identification : Identification, optional
         An emulator already identified for this plant and seed (NN-adaptive controllers only).
     identify : bool
-        Pre-train an NN-adaptive controller's emulator now (SPEC 3.7).
+        Pre-train an NN-adaptive controller's emulator now (model.md §3.7).
 
     Returns
     -------
@@ -126,7 +126,7 @@ def prepare(scenario: Scenario, *, seed: int | None = None, identification: Iden
 def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
                         result: Identification | None = None) -> Setup:
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
-    (SPEC 3.7), with the scenario's disturbance and noise, and hand it the trained network."""
+    (model.md §3.7), with the scenario's disturbance and noise, and hand it the trained network."""
     outer = setup.controller.outer
     if result is None:  # as a batch of one, so that its bits equal its row in any batch's identification
         inputs = (setup.plant_params, setup.controller.inner, outer.emulator, key, setup.disturbance, setup.noise)

@@ -1,4 +1,4 @@
-"""Scenario files: TOML -> validated pydantic models -> runtime objects, through registries (DESIGN 4).
+"""Scenario files: TOML -> validated pydantic models -> runtime objects, through registries (docs/guide.md).
 
 Every user mistake becomes a :class:`~ddtrack.errors.ConfigError` naming the field (``robot.mass``)
 and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left out takes the
@@ -216,7 +216,7 @@ class ConstantDisturbance(_Section):
 
 
 class SinusoidDisturbance(_Section):
-    """bias + amplitude * sin(frequency t + phase), per wheel (SPEC 1.4's default)."""
+    """bias + amplitude * sin(frequency t + phase), per wheel (model.md §1.4's default)."""
 
     kind: Literal["sinusoid"]
     bias: Pair = Field((0.0, 0.0), description="[right, left] constant part [N m].")
@@ -273,7 +273,7 @@ class LineTrajectory(_Section):
 
 
 class SquareTrajectory(_Section):
-    """The paper's square, counter-clockwise from ``corner`` with heading 0 (SPEC 4.3)."""
+    """The paper's square, counter-clockwise from ``corner`` with heading 0 (model.md §4.3)."""
 
     kind: Literal["square"]
     corner: Position = Field((10.0, 0.0), description="Starting corner C0 [m].")
@@ -442,8 +442,8 @@ class InitialConfig(_Section):
 
 
 class _InnerLoopConfig(_Section):
-    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (DESIGN 3): computed torque
-    (eq. 11) or wheel-space PD (SPEC 2.6), so every velocity-level controller meets the same dynamics layer."""
+    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md): computed torque
+    (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level controller meets the same dynamics layer."""
 
     kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
     inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
@@ -458,7 +458,7 @@ class _InnerLoopConfig(_Section):
         return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
 
     def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
-        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (SPEC 2.5, 2.6)."""
+        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6)."""
         if self.inner == "computed_torque":
             return self.kc
         r2 = nominal.wheel_radius**2
@@ -493,7 +493,7 @@ PositiveTriple = tuple[Positive, Positive, Positive]
 
 
 class NNAdaptiveConfig(BacksteppingConfig):
-    """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (SPEC 3)."""
+    """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (model.md §3)."""
 
     kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
     rates: tuple[NonNegative, NonNegative, NonNegative] = Field((200.0, 200.0, 200.0), description=(
@@ -510,7 +510,7 @@ class NNAdaptiveConfig(BacksteppingConfig):
         "network", description=("Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
                                 "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."))
     error_jacobian: Literal["exact", "paper"] = Field("exact", description=(
-        "d e_p / d q: exact (SPEC 3.3) or the paper's approximation -T_e."))
+        "d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e."))
     emulator: Literal["E1", "E0"] = Field("E1", description=(
         "E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c)."))
     hidden_units: int = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
@@ -612,7 +612,7 @@ class LTVLQRConfig(_InnerLoopConfig):
                                control_period=control_period, min_velocity=self.min_velocity,
                                max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
                                dare_iterations=self.dare_iterations)
-        # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
+        # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
@@ -640,7 +640,7 @@ class SlidingModeConfig(_Section):
 
 
 class KinematicBacksteppingConfig(_Section):
-    """Kanayama's law on the unicycle with ideal velocity tracking: a reference point (paper eq. 12, SPEC 2.4)."""
+    """Kanayama's law on the unicycle with ideal velocity tracking: a reference point (paper eq. 12, model.md §2.4)."""
 
     kind: Literal["kinematic_backstepping"]
     gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
@@ -700,7 +700,7 @@ class RegulatedPurePursuitConfig(_InnerLoopConfig):
             rotate_yaw_rate=self.rotate_yaw_rate, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
             search_horizon=self.search_horizon, search_samples=self.search_samples,
             rotate_to_heading=self.rotate_to_heading)
-        # the same inner loops as backstepping, so the comparison is fair (DESIGN 3)
+        # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
@@ -788,7 +788,7 @@ ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig, LTVLQRC
 
 
 class Scenario(_Section):
-    """A whole scenario file (DESIGN 4).
+    """A whole scenario file (docs/guide.md).
 
     Every key, its unit, default and bounds: ``docs/reference.md`` (``ddtrack schema``).
 

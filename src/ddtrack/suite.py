@@ -35,7 +35,7 @@ from .tune import problems, tune
 TUNED = "backstepping_tuned"
 BASELINE = "backstepping"
 
-# the paper's wheel-torque disturbance (SPEC 1.4)
+# the paper's wheel-torque disturbance (model.md §1.4)
 _PAPER_DISTURBANCE = {"kind": "sinusoid", "bias": [0.03, 0.0], "amplitude": [0.05, -0.05], "frequency": 0.5}
 #: uncertainty level -> replacements of the scenario's [plant], [disturbance] and [noise] (the nominal [robot] stays)
 LEVELS: dict[str, dict[str, Any]] = {

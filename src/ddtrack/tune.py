@@ -9,7 +9,7 @@ run (``whole_run``). Its gradient is ``jax.grad`` through
 the simulator's ``lax.scan`` (reverse mode through the RK4 substeps, the controller and its clamps). The gains are
 optimised in log space with Adam, so they stay positive, and clipped to ``[gain_min, gain_max]``.
 
-This gives the paper's online gain law (SPEC 3) a fair opponent: backstepping whose constant gains were chosen
+This gives the paper's online gain law (model.md §3) a fair opponent: backstepping whose constant gains were chosen
 as well as the same cost allows on the same training runs, instead of by hand.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Controllers: the protocol, inner loops and Kanayama backstepping (SPEC 2)."""
+"""Controllers: the protocol, inner loops and Kanayama backstepping (model.md §2)."""
 from .backstepping import Backstepping, clamp_command, kanayama_command, kanayama_command_rate, lyapunov
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw
 from .dither import Dithered

@@ -1,4 +1,4 @@
-"""Kanayama backstepping: the kinematic law (paper eq. 12), its analytic derivative (SPEC 2.5) and
+"""Kanayama backstepping: the kinematic law (paper eq. 12), its analytic derivative (model.md §2.5) and
 the Lyapunov function (eq. 13)."""
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ from .base import Logs, VelocityCommand
 
 
 def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
-    """nu_c = [v_r cos e_th + Kx e_x, omega_r + v_r (Ky e_y + Kth sin e_th)] (paper eq. 12, SPEC 2.4).
+    """nu_c = [v_r cos e_th + Kx e_x, omega_r + v_r (Ky e_y + Kth sin e_th)] (paper eq. 12, model.md §2.4).
 
-    ``error`` = [e_x, e_y, e_theta] (SPEC 2.2); ``gains`` = [Kx, Ky, Ktheta] > 0.
+    ``error`` = [e_x, e_y, e_theta] (model.md §2.2); ``gains`` = [Kx, Ky, Ktheta] > 0.
     """
     e_x, e_y, e_th = error[0], error[1], error[2]
     kx, ky, kth = gains[0], gains[1], gains[2]
@@ -22,7 +22,7 @@ def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
 
 
 def kanayama_command_rate(error: Array, nu: Array, ref: Reference, gains: Array) -> Array:
-    """Analytic d nu_c / dt with the gains held and the measured nu in the error dynamics (SPEC 2.5)."""
+    """Analytic d nu_c / dt with the gains held and the measured nu in the error dynamics (model.md §2.5)."""
     e_y, e_th = error[1], error[2]
     kx, ky, kth = gains[0], gains[1], gains[2]
     de_x, de_y, de_th = error_rates(error, nu[0], nu[1], ref.v, ref.omega)
@@ -38,7 +38,7 @@ def lyapunov(error: Array, ky: Array) -> Array:
 
 
 def clamp_command(nu_c: Array, nu_c_dot: Array, limits: Array) -> tuple[Array, Array, Array]:
-    """Clamp |v_c| <= limits[0], |omega_c| <= limits[1]; a clamped channel's derivative becomes 0 (SPEC 2.5).
+    """Clamp |v_c| <= limits[0], |omega_c| <= limits[1]; a clamped channel's derivative becomes 0 (model.md §2.5).
 
     Returns the clamped command, its derivative and 1.0 if any channel was clamped (else 0.0).
     """
@@ -59,13 +59,13 @@ def velocity_command(error: Array, nu: Array, ref: Reference, gains: Array, limi
 
 @pytree_dataclass
 class Backstepping:
-    """Kanayama backstepping velocity law (paper eq. 12; SPEC 2.4, 2.5).
+    """Kanayama backstepping velocity law (paper eq. 12; model.md §2.4, 2.5).
 
     In: measured state y = [x, y, theta, v, omega] and the reference. Out: nu_c = (v_c [m/s],
     omega_c [rad/s]) clamped to ``max_velocity`` and ``max_yaw_rate``, with its analytic derivative.
     As a whole controller (``step``) it drives a kinematic plant; over a dynamic plant compose it
     with an inner loop in a :class:`~ddtrack.controllers.Cascade`. ``strict`` adds the cross term
-    [e_x, sin(e_th)/Ky] to the inner loop's u (SPEC 2.4, not in the paper). Logs the gains.
+    [e_x, sin(e_th)/Ky] to the inner loop's u (model.md §2.4, not in the paper). Logs the gains.
     """
 
     kx: float = 1.0

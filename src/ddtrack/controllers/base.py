@@ -1,6 +1,6 @@
 """The controller protocol and the cascade of an outer velocity law over an inner torque law.
 
-One calling convention for every controller (DESIGN 3)::
+One calling convention for every controller (docs/architecture.md)::
 
     memory = controller.init(x0, ref0, key)
     u, memory, logs = controller.step(t, y, ref, memory)
@@ -41,7 +41,7 @@ class VelocityCommand(NamedTuple):
     """What an outer law hands the inner loop."""
 
     nu_c: Array  #: commanded (v_c [m/s], omega_c [rad/s])
-    nu_c_dot: Array  #: its time derivative (analytic, SPEC 2.5)
+    nu_c_dot: Array  #: its time derivative (analytic, model.md §2.5)
     feedback: Array  #: extra term added to u of eq. 11 (strict backstepping cross term; zero otherwise)
     saturated: Array  #: 1.0 when a velocity clamp was active, else 0.0
 
@@ -62,7 +62,7 @@ class VelocityLaw(Protocol):
 
 
 class TorqueLaw(Protocol):
-    """An inner (dynamic) loop of a :class:`Cascade`: velocity command in, wheel torques out (SPEC 2.5, 2.6)."""
+    """An inner (dynamic) loop of a :class:`Cascade`: velocity command in, wheel torques out (model.md §2.5, 2.6)."""
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
         """The initial memory (see :meth:`Controller.init`)."""
@@ -76,7 +76,7 @@ class TorqueLaw(Protocol):
 
 @pytree_dataclass
 class Cascade:
-    """An outer velocity law over an inner torque law, so baselines share inner loops (DESIGN 3).
+    """An outer velocity law over an inner torque law, so baselines share inner loops (docs/architecture.md).
 
     Logs: ``v_cmd`` [m/s], ``omega_cmd`` [rad/s], ``saturated`` (1.0 when a velocity clamp or the
     torque limit was active), plus the outer law's logs, plus ``inner.logs(memory)`` of an inner law

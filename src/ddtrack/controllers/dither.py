@@ -1,4 +1,4 @@
-"""A small random dither on an outer law's command, for identification experiments (SPEC 3.7)."""
+"""A small random dither on an outer law's command, for identification experiments (model.md §3.7)."""
 from __future__ import annotations
 
 from typing import Any

@@ -1,4 +1,4 @@
-"""Inner (dynamic) loops: velocity command -> wheel torques (SPEC 2.5, 2.6).
+"""Inner (dynamic) loops: velocity command -> wheel torques (model.md §2.5, 2.6).
 
 Both saturate at the nominal ``max_torque`` and report whether they did.
 """
@@ -19,7 +19,7 @@ def _saturate(tau: Array, limit: Array) -> tuple[Array, Array]:
 
 @pytree_dataclass
 class ComputedTorque:
-    """Computed torque on the nominal model (paper eqs. 7, 11; SPEC 2.5).
+    """Computed torque on the nominal model (paper eqs. 7, 11; model.md §2.5).
 
     u = nu_c_dot + K_c (nu_c - nu) [+ strict cross term];
     tau = B_bar^-1 (M_hat u + V_hat(nu) nu) + tau_f_hat(W nu) [N m].
@@ -44,7 +44,7 @@ class ComputedTorque:
 
 @pytree_dataclass
 class WheelPD:
-    """Wheel-space PD, the consistent form of the paper's eq. 21 (SPEC 2.6).
+    """Wheel-space PD, the consistent form of the paper's eq. 21 (model.md §2.6).
 
     tau = K_P (phi_dot_c - phi_dot) + K_D d/dt (phi_dot_c - phi_dot), phi_dot_c = W nu_c, with
     d/dt phi_dot_c = W nu_c_dot analytic and d/dt phi_dot a backward difference over one control

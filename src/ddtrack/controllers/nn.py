@@ -1,4 +1,4 @@
-"""The emulator network of the NN-adaptive controller (SPEC 3.7; paper eqs. 19, 20, 32-34 corrected).
+"""The emulator network of the NN-adaptive controller (model.md §3.7; paper eqs. 19, 20, 32-34 corrected).
 
 Two layers, tanh hidden units, linear output, biases, with fixed input and output scales:
 z~ = z / s_z,  h = tanh(W1 z~ + b1),  y~ = W2 h + b2,  y = s_y * y~.
@@ -34,7 +34,7 @@ class Scales:
 
 
 def init_mlp(key: Array, n_in: int, n_hidden: int, n_out: int) -> MLP:
-    """W1 ~ U(-1, 1)/sqrt(n_in), W2 ~ U(-1, 1)/sqrt(N_h), biases 0 (SPEC 3.7)."""
+    """W1 ~ U(-1, 1)/sqrt(n_in), W2 ~ U(-1, 1)/sqrt(N_h), biases 0 (model.md §3.7)."""
     k1, k2 = jax.random.split(key)
     return MLP(
         w1=jax.random.uniform(k1, (n_hidden, n_in), minval=-1.0, maxval=1.0) / jnp.sqrt(n_in),
@@ -56,7 +56,7 @@ def predict(mlp: MLP, scales: Scales, z: Array) -> Array:
 
 
 def input_jacobian(mlp: MLP, scales: Scales, z: Array) -> Array:
-    """dy/dz = diag(s_y) W2 diag(1 - h^2) W1 diag(1/s_z) (paper eq. 34 corrected, SPEC 3.7), (n_out, n_in)."""
+    """dy/dz = diag(s_y) W2 diag(1 - h^2) W1 diag(1/s_z) (paper eq. 34 corrected, model.md §3.7), (n_out, n_in)."""
     _, h = forward(mlp, z / scales.inputs)
     return (scales.outputs[:, None] * mlp.w2) @ ((1.0 - h**2)[:, None] * mlp.w1) / scales.inputs[None, :]
 
@@ -68,7 +68,7 @@ def sample_loss(mlp: MLP, z_normalised: Array, target_normalised: Array) -> Arra
 
 
 def backprop(mlp: MLP, z_normalised: Array, target_normalised: Array) -> MLP:
-    """Gradient of :func:`sample_loss` by the closed form of SPEC 3.7 (delta_2 = y~ - y~*, ...)."""
+    """Gradient of :func:`sample_loss` by the closed form of model.md §3.7 (delta_2 = y~ - y~*, ...)."""
     y, h = forward(mlp, z_normalised)
     delta2 = y - target_normalised
     delta1 = (mlp.w2.T @ delta2) * (1.0 - h**2)
@@ -77,7 +77,7 @@ def backprop(mlp: MLP, z_normalised: Array, target_normalised: Array) -> MLP:
 
 def momentum_step(mlp: MLP, velocity: MLP, gradient: MLP, *, learning_rate: Array, momentum: Array,
                   clip_norm: Array) -> tuple[MLP, MLP]:
-    """dW(k) = -eta * clip(grad) + beta * dW(k-1); W <- W + dW, for every weight array (SPEC 3.7)."""
+    """dW(k) = -eta * clip(grad) + beta * dW(k-1); W <- W + dW, for every weight array (model.md §3.7)."""
     norm = jnp.sqrt(total(jnp.concatenate([jnp.ravel(g**2) for g in jax.tree_util.tree_leaves(gradient)])))
     factor = jnp.minimum(1.0, clip_norm / jnp.maximum(norm, 1e-300))
     velocity = jax.tree_util.tree_map(lambda g, v: -learning_rate * factor * g + momentum * v, gradient, velocity)

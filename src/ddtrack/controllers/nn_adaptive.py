@@ -1,7 +1,7 @@
 """NN-adaptive backstepping: Kanayama gains tuned online by gradient descent through the Jacobian of
-an emulator network that learns the robot (the paper's contribution; SPEC 3, pseudo-code 3.8).
+an emulator network that learns the robot (the paper's contribution; model.md §3, pseudo-code 3.8).
 
-One control period (SPEC 3.8)::
+One control period (model.md §3.8)::
 
     e        = posture_error(y_k, ref_k)
     emulator <- one momentum-SGD step on the last transition (z_{k-1}, body_increment(q_{k-1}, q_k))
@@ -9,7 +9,7 @@ One control period (SPEC 3.8)::
         g     = (Gamma e) D_b J_b^n Phi                      eqs. 22-25, 34 corrected
         dA    = clip(-T_c Lambda g + beta_K dA_prev - T_c sigma (A - A_0), +-dA_max)
         A     = clip(A + dA, A_min, A_max)
-    nu_c     = clamp(kanayama(e, ref, A)),  nu_c_dot analytic   eq. 12, SPEC 2.5
+    nu_c     = clamp(kanayama(e, ref, A)),  nu_c_dot analytic   eq. 12, model.md §2.5
     z_k      = [nu_c, nu_k]                                  the emulator's next training input
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ ERROR_JACOBIANS = ("exact", "paper")
 @pytree_dataclass
 class Emulator:
     """The network and its fixed scales. E1 (``uses_velocity``): input [v_c, omega_c, v, omega];
-    E0: input [v_c, omega_c]. Output: the body-frame one-step pose increment (SPEC 3.7)."""
+    E0: input [v_c, omega_c]. Output: the body-frame one-step pose increment (model.md §3.7)."""
 
     mlp: MLP
     scales: Scales
@@ -46,7 +46,7 @@ class Emulator:
 
 def emulator_scales(control_period: float, *, uses_velocity: bool, max_velocity: float = 1.0,
                     max_yaw_rate: float = 2.0) -> Scales:
-    """s_z = [v_max, w_max(, v_max, w_max)], s_y = [T_c v_max, 0.05 T_c v_max, T_c w_max] (SPEC 3.7)."""
+    """s_z = [v_max, w_max(, v_max, w_max)], s_y = [T_c v_max, 0.05 T_c v_max, T_c w_max] (model.md §3.7)."""
     inputs = [max_velocity, max_yaw_rate] * (2 if uses_velocity else 1)
     tv = control_period * max_velocity
     return Scales(inputs=jnp.asarray(inputs, float),
@@ -55,12 +55,12 @@ def emulator_scales(control_period: float, *, uses_velocity: bool, max_velocity:
 
 def one_step_coefficient(bandwidth: Array, control_period: float) -> Array:
     """c = T_c - (1 - exp(-k T_c)) / k: displacement per sample per unit command for an inner loop of
-    bandwidth k [1/s] (SPEC 3.4 (a), the consistent reading of the paper's eqs. 27-31)."""
+    bandwidth k [1/s] (model.md §3.4 (a), the consistent reading of the paper's eqs. 27-31)."""
     return control_period - (1.0 - jnp.exp(-bandwidth * control_period)) / bandwidth
 
 
 def error_jacobian_body(error: Array, exact: bool) -> Array:
-    """D_b = D R_3(theta) = [[-1, 0, e_y], [0, -1, -e_x], [0, 0, -1]] (SPEC 3.3); the paper's
+    """D_b = D R_3(theta) = [[-1, 0, e_y], [0, -1, -e_x], [0, 0, -1]] (model.md §3.3); the paper's
     D ~ -T_e gives -I."""
     if not exact:
         return -jnp.eye(3)
@@ -74,14 +74,14 @@ def gain_sensitivity(error: Array, ref: Reference) -> Array:
 
 
 def cost_gradient(error: Array, ref: Reference, gamma: Array, plant_jacobian_body: Array, exact: bool) -> Array:
-    """dJ/dalpha = e^T Gamma D_b J_b Phi for J = e^T Gamma e / 2 (eqs. 22-23, SPEC 3.1, 3.5 generic form)."""
+    """dJ/dalpha = e^T Gamma D_b J_b Phi for J = e^T Gamma e / 2 (eqs. 22-23, model.md §3.1, 3.5 generic form)."""
     return (gamma * error) @ error_jacobian_body(error, exact) @ plant_jacobian_body @ gain_sensitivity(error, ref)
 
 
 def sensitivity_step(sensitivity: Array, y: Array, ref: Reference, gains: Array, plant_jacobian_body: Array,
                      scale: Array, control_period: float) -> Array:
     """Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J^n Phi(k), with J = R_3(theta) J_b^n c_bar
-    (SPEC 3.6 Mode B): the transition takes the real J, the input the normalised J^n = J / c_bar (``scale``), so
+    (model.md §3.6 Mode B): the transition takes the real J, the input the normalised J^n = J / c_bar (``scale``), so
     Sigma = (d q / d alpha) / c_bar, in the units of Mode A's J^n Phi. The clamps are ignored, as in Phi."""
     theta, v = y[2], y[3]
     world_jacobian = rotation(theta) @ plant_jacobian_body
@@ -93,13 +93,13 @@ def sensitivity_step(sensitivity: Array, y: Array, ref: Reference, gains: Array,
 
 
 def sensitivity_gradient(error: Array, y: Array, gamma: Array, sensitivity: Array, exact: bool) -> Array:
-    """dJ/dalpha = e^T Gamma D Sigma, with D = D_b R_3(theta)^T the world-frame d e_p / d q (SPEC 3.3)."""
+    """dJ/dalpha = e^T Gamma D Sigma, with D = D_b R_3(theta)^T the world-frame d e_p / d q (model.md §3.3)."""
     return (gamma * error) @ error_jacobian_body(error, exact) @ rotation(y[2]).T @ sensitivity
 
 
 class AdaptiveMemory(NamedTuple):
-    """Everything the NN-adaptive law evolves, carried between control periods (DESIGN 3): the gains, the
-    emulator and its momentum, and the previous sample it learns from (SPEC 3.6 to 3.8)."""
+    """Everything the NN-adaptive law evolves, carried between control periods (docs/architecture.md): the gains, the
+    emulator and its momentum, and the previous sample it learns from (model.md §3.6 to 3.8)."""
 
     gains: Array  #: current (Kx, Ky, Ktheta)
     last_step: Array  #: previous gain change, for the gain momentum
@@ -114,7 +114,7 @@ class AdaptiveMemory(NamedTuple):
 
 @pytree_dataclass
 class NNAdaptiveBackstepping:
-    """Kanayama law whose gains adapt online through the emulator's Jacobian (SPEC 3).
+    """Kanayama law whose gains adapt online through the emulator's Jacobian (model.md §3).
 
     In: measured state y and reference. Out: nu_c = (v_c [m/s], omega_c [rad/s]), clamped, with its
     analytic derivative; composed with an inner loop in a :class:`~ddtrack.controllers.Cascade`.
@@ -122,10 +122,10 @@ class NNAdaptiveBackstepping:
     ``emulator_loss`` (normalised sample loss of the online step), ``jacobian_v`` and ``jacobian_omega``
     (normalised J_b[0, 0] and J_b[2, 1] used by the gain law) and ``gate`` (1.0 when the gains moved).
 
-    ``jacobian`` picks J (SPEC 3.4): ``network`` (the emulator, eq. 34), ``analytic`` (a), ``quasi_static`` (b),
+    ``jacobian`` picks J (model.md §3.4): ``network`` (the emulator, eq. 34), ``analytic`` (a), ``quasi_static`` (b),
     ``model`` (the exact one-step sensitivity of the nominal model under the inner loop, by automatic
     differentiation: ``nominal_period``), or ``model_sensitivity``: that J in the multi-step forward sensitivity
-    recursion of SPEC 3.6's Mode B, Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J Phi(k), with the
+    recursion of model.md §3.6's Mode B, Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J Phi(k), with the
     gradient e^T Gamma D Sigma / c_bar. Sigma restarts from 0 whenever the gate is closed, so it covers the
     trajectory since adaptation last resumed.
     """
@@ -133,7 +133,7 @@ class NNAdaptiveBackstepping:
     gains: Array  #: initial (Kx, Ky, Ktheta)
     emulator: Emulator
     control_period: float
-    analytic_coefficients: Array  #: (c_v, c_omega) of SPEC 3.4 (a) for the nominal inner loop
+    analytic_coefficients: Array  #: (c_v, c_omega) of model.md §3.4 (a) for the nominal inner loop
     rates: Array = (200.0, 200.0, 200.0)  #: Lambda [1/s], with the normalised Jacobian
     gain_momentum: float = 0.0  #: beta_K
     max_step: Array = (0.05, 5.0, 0.5)  #: per-sample clip of the gain change
@@ -165,7 +165,7 @@ class NNAdaptiveBackstepping:
                               jnp.zeros(n_in), jnp.asarray(0.0), jnp.asarray(0.0), sensitivity)
 
     def _plant_jacobian(self, mlp: MLP, nu_c: Array, nu: Array) -> Array:
-        """Body-frame J_b^n (3x2) of the configured source, normalised by c_bar (SPEC 3.4)."""
+        """Body-frame J_b^n (3x2) of the configured source, normalised by c_bar (model.md §3.4)."""
         c_v, c_w = jnp.asarray(self.analytic_coefficients)[0], jnp.asarray(self.analytic_coefficients)[1]
         if self.jacobian == "quasi_static":
             return jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])  # T_c S / T_c
@@ -176,7 +176,7 @@ class NNAdaptiveBackstepping:
             return self.nominal_period.jacobian(nu, nu_c, held) / c_v
         emulator = Emulator(mlp, self.emulator.scales, self.emulator.uses_velocity)
         jb = input_jacobian(mlp, emulator.scales, emulator.inputs(nu_c, nu))[:, :2] / c_v
-        if self.structured_jacobian:  # keep the two direct channels, positive (SPEC 3.7 safeguards)
+        if self.structured_jacobian:  # keep the two direct channels, positive (model.md §3.7 safeguards)
             jb = jnp.array([[jnp.maximum(jb[0, 0], 0.0), 0.0], [0.0, 0.0], [0.0, jnp.maximum(jb[2, 1], 0.0)]])
         return jb
 

@@ -1,6 +1,6 @@
 """``ddtrack/DiffDriveTracking-v0``: trajectory tracking of a differential-drive robot as a Gymnasium environment.
 
-A thin shell over the simulator (DESIGN 3): each ``step`` is one control period of
+A thin shell over the simulator (docs/architecture.md): each ``step`` is one control period of
 :func:`ddtrack.sim.simulate`, through the same functions (:func:`~ddtrack.sim.plant_period`,
 :func:`~ddtrack.sim.period_status`), on the plant, disturbance and measurement noise that
 :func:`ddtrack.runner.prepare` draws from the seed, as ``ddtrack run`` does.
@@ -29,7 +29,7 @@ Observation (float32, physical units, each clipped to its bound)
 What the controller sees, y = x + noise (``noise.measure``, the scenario's ``[noise]``), against the reference
 at the same instant::
 
-    0 e_x [m]   1 e_y [m]        posture error in the robot frame (SPEC 2.2), bound +-simulation.divergence_error
+    0 e_x [m]   1 e_y [m]        posture error in the robot frame (model.md §2.2), bound +-simulation.divergence_error
     2 sin e_theta   3 cos e_theta                                              bound +-1
     4 v [m/s]   5 omega [rad/s]  the robot's measured velocities,              bound +-50 (the divergence speed)
     6 v_r [m/s] 7 omega_r [rad/s] the reference's feed-forward velocities,    bound +-50
@@ -42,7 +42,7 @@ period's noise draw (a run draws one per period).
 Reward
 ------
 r_k = -T_c (J(k+1) + effort_weight |tau_k|^2), with J = 1/2 e_p^T Gamma e_p, Gamma = diag(1, 50, 1) (paper eq. 22,
-SPEC 3.1) of the *true* state x_{k+1} against the reference at t_{k+1}, and tau_k the wheel torques held
+model.md §3.1) of the *true* state x_{k+1} against the reference at t_{k+1}, and tau_k the wheel torques held
 [N m] (zero effort for a kinematic plant). The factor T_c makes the return the time integral of the cost,
 -int (J + w |tau|^2) dt [m^2 s], whatever the control period. Scale on ``paper_line`` (40 s; the robot starts
 10 m from the reference point, 7.07 m off the line): the scenario's own gains score -895, of which -893 in
@@ -86,7 +86,7 @@ from ..sim import STATUS_NAMES, Draws, period_status, plant_period
 
 ACTION_MODES = ("torque", "gains")
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
-GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (SPEC 3.1)
+GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
 DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] at which a run diverges (simulate's default, as in a run)
 GAINS_CONTROLLERS = ("backstepping", "nn_adaptive_backstepping", "sliding_mode_backstepping",
                      "adaptive_backstepping", "kinematic_backstepping")  #: kinds whose outer law is Kanayama's

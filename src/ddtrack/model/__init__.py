@@ -1,4 +1,4 @@
-"""The robot: parameters, kinematics, Lagrangian dynamics, plants, disturbances and noise (SPEC 1)."""
+"""The robot: parameters, kinematics, Lagrangian dynamics, plants, disturbances and noise (model.md §1)."""
 from .disturbance import MeasurementNoise, WheelDisturbance
 from .dynamics import (
     body_acceleration,

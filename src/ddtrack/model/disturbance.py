@@ -1,4 +1,4 @@
-"""Wheel-torque disturbances and pose-measurement noise (SPEC 1.2, 4.1).
+"""Wheel-torque disturbances and pose-measurement noise (model.md §1.2, 4.1).
 
 One disturbance form covers every kind the scenarios name (none, constant, sinusoid, gaussian):
 ``tau_d(t_k) = bias + amplitude * sin(frequency * t_k + phase) + std * xi_k``, with ``xi_k`` standard

@@ -1,4 +1,4 @@
-"""Kinematics and Lagrangian dynamics of the differential-drive robot (SPEC 1; paper eqs. 1-9).
+"""Kinematics and Lagrangian dynamics of the differential-drive robot (model.md §1; paper eqs. 1-9).
 
 State ``X = [x, y, theta, v, omega]``: pose of the axle midpoint A [m, m, rad], forward speed [m/s]
 and yaw rate [rad/s]. Wheel torques ``tau = [tau_R, tau_L]`` [N m].
@@ -10,7 +10,7 @@ from jax import Array
 
 from .params import RobotParams
 
-# --- kinematics (SPEC 1.1) -------------------------------------------------------------------
+# --- kinematics (model.md §1.1) -------------------------------------------------------------------
 
 
 def constraint_matrix(theta: Array) -> Array:
@@ -41,7 +41,7 @@ def body_velocity(params: RobotParams, phi_dot: Array) -> Array:
     return jnp.stack([r * (phi_dot[0] + phi_dot[1]) / 2.0, r * (phi_dot[0] - phi_dot[1]) / (2.0 * half)])
 
 
-# --- full Lagrangian model (SPEC 1.2; paper eqs. 4-5 corrected), used to check the reduced one ----
+# --- full Lagrangian model (model.md §1.2; paper eqs. 4-5 corrected), used to check the reduced one ----
 
 
 def mass_matrix(params: RobotParams, theta: Array) -> Array:
@@ -67,7 +67,7 @@ def input_matrix(params: RobotParams, theta: Array) -> Array:
     return jnp.array([[c, c], [s, s], [half, -half]]) / params.wheel_radius
 
 
-# --- reduced dynamics in nu = (v, omega) (SPEC 1.3; paper eqs. 6-7) -----------------------------
+# --- reduced dynamics in nu = (v, omega) (model.md §1.3; paper eqs. 6-7) -----------------------------
 
 
 def reduced_mass(params: RobotParams) -> Array:
@@ -94,14 +94,14 @@ def reduced_input_inverse(params: RobotParams) -> Array:
 
 
 def wheel_friction(params: RobotParams, phi_dot: Array) -> Array:
-    """tau_f = b_w phi_dot + tau_c tanh(phi_dot / eps_f), per wheel, opposing the drive (SPEC 1.2)."""
+    """tau_f = b_w phi_dot + tau_c tanh(phi_dot / eps_f), per wheel, opposing the drive (model.md §1.2)."""
     return params.viscous_friction * phi_dot + params.coulomb_friction * jnp.tanh(
         phi_dot / params.friction_smoothing
     )
 
 
 def body_acceleration(params: RobotParams, nu: Array, tau: Array, tau_dist: Array) -> Array:
-    """nu_dot from M_bar nu_dot + V_bar nu + F_bar + tau_bar_d = B_bar tau (SPEC 1.3, scalar form).
+    """nu_dot from M_bar nu_dot + V_bar nu + F_bar + tau_bar_d = B_bar tau (model.md §1.3, scalar form).
 
     ``tau_dist`` are wheel disturbance torques that oppose the drive when positive [N m].
     """

@@ -1,4 +1,4 @@
-"""Physical parameters of a differential-drive robot (SPEC 0, 1.4)."""
+"""Physical parameters of a differential-drive robot (model.md §0, 1.4)."""
 from __future__ import annotations
 
 from .._pytree import pytree_dataclass
@@ -6,7 +6,7 @@ from .._pytree import pytree_dataclass
 
 @pytree_dataclass
 class RobotParams:
-    """Parameters of the reduced Lagrangian model (SPEC 1.3). All SI units.
+    """Parameters of the reduced Lagrangian model (model.md §1.3). All SI units.
 
     Attributes
     ----------

@@ -28,7 +28,7 @@ class Plant(Protocol):
 
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
         """X_dot under the held input ``u`` and the wheel disturbance torques ``tau_dist`` (2,) [N m]
-        (SPEC 1.3): [x_dot, y_dot, theta_dot, v_dot, omega_dot]."""
+        (model.md §1.3): [x_dot, y_dot, theta_dot, v_dot, omega_dot]."""
         ...
 
     def saturate(self, u: Array) -> Array:
@@ -38,7 +38,7 @@ class Plant(Protocol):
 
 @pytree_dataclass
 class DynamicPlant:
-    """The Lagrangian robot (SPEC 1.3): input wheel torques [N m], saturated at ``params.max_torque``."""
+    """The Lagrangian robot (model.md §1.3): input wheel torques [N m], saturated at ``params.max_torque``."""
 
     params: RobotParams
     input_kind = "torque"

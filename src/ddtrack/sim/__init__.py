@@ -1,4 +1,4 @@
-"""The simulator: fixed-step RK4 under a zero-order hold, one ``lax.scan`` per run (DESIGN 3)."""
+"""The simulator: fixed-step RK4 under a zero-order hold, one ``lax.scan`` per run (docs/architecture.md)."""
 from .batch import simulate_alone, simulate_batch, stack, vmap_runs
 from .integrators import rk4, rk4_step
 from .result import REMEDIES, STATUS_NAMES, SimResult, remedy, timeseries

@@ -46,7 +46,7 @@ class SimResult(NamedTuple):
     reference : Reference
         The reference at t_k, each field of shape (N,).
     error : Array, shape (N, 3)
-        Posture error [e_x, e_y, e_theta] of the true state [m, m, rad] (SPEC 2.2).
+        Posture error [e_x, e_y, e_theta] of the true state [m, m, rad] (model.md §2.2).
     control : Array, shape (N, 2)
         Plant input held over [t_k, t_k+1): wheel torques [N m], or (v [m/s], omega [rad/s]).
     logs : dict of str to Array
@@ -60,7 +60,7 @@ class SimResult(NamedTuple):
     t: Array  #: (N,) sample times [s]
     state: Array  #: (N, 5) true state x_k = [x, y, theta, v, omega] at t_k
     reference: Reference  #: fields of shape (N,)
-    error: Array  #: (N, 3) posture error [e_x, e_y, e_theta] of the true state (SPEC 2.2)
+    error: Array  #: (N, 3) posture error [e_x, e_y, e_theta] of the true state (model.md §2.2)
     control: Array  #: (N, 2) plant input held over [t_k, t_k+1): torques [N m] or (v, omega)
     logs: dict  #: name -> (N,) logged scalars
     status: Array  #: 0 ok, 1 diverged, 2 non_finite
@@ -85,7 +85,7 @@ class SimResult(NamedTuple):
 
 
 def timeseries(result: SimResult) -> dict[str, np.ndarray]:
-    """The documented time-series columns (DESIGN 4) of the valid rows, as float64 NumPy arrays.
+    """The documented time-series columns (docs/guide.md) of the valid rows, as float64 NumPy arrays.
 
     ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
     v_cmd, omega_cmd, tau_r, tau_l`` and every logged scalar (``kx, ky, ktheta``, ``saturated``, ...).

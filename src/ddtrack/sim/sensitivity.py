@@ -1,6 +1,6 @@
 """One control period of the nominal model, differentiable: the NN-adaptive gain law's model Jacobians.
 
-The paper's gain law needs J = d q(k+1) / d nu_c(k) (SPEC 3.4). Besides the emulator's Jacobian (eq. 34) and the
+The paper's gain law needs J = d q(k+1) / d nu_c(k) (model.md §3.4). Besides the emulator's Jacobian (eq. 34) and the
 analytic approximations (a), (b), this gives the exact per-sample sensitivity of the *nominal* model: one period of
 the controller's own model of the robot under its inner loop, with nu_c held, differentiated by ``jax.jacfwd``.
 It lives in ``sim`` because it integrates; the scenario layer hands it to the controller, which sees it only

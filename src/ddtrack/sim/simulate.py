@@ -1,4 +1,4 @@
-"""The closed-loop simulator: one ``jax.lax.scan`` over control periods (DESIGN 3, SPEC 2.7)."""
+"""The closed-loop simulator: one ``jax.lax.scan`` over control periods (docs/architecture.md, model.md §2.7)."""
 from __future__ import annotations
 
 from functools import partial
@@ -73,7 +73,7 @@ def period_status(x: Array, x_next: Array, u: Array, error: Array, *, divergence
     is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds
     ``divergence_error`` [m] or |v| [m/s] or |omega| [rad/s] of x_k exceeds ``divergence_speed``, else 0 (``ok``).
 
-    ``error`` is the posture error of x_k (SPEC 2.2); ``u`` the saturated input (:func:`plant_period`).
+    ``error`` is the posture error of x_k (model.md §2.2); ``u`` the saturated input (:func:`plant_period`).
     """
     finite = jnp.all(jnp.isfinite(x_next)) & jnp.all(jnp.isfinite(u))
     too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(x[3:5]) > divergence_speed)

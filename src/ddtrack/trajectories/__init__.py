@@ -1,4 +1,4 @@
-"""Reference trajectories: pure functions of time returning a :class:`Reference` (SPEC 2.1, 4.2, 4.3)."""
+"""Reference trajectories: pure functions of time returning a :class:`Reference` (model.md §2.1, 4.2, 4.3)."""
 from .base import ParametricCurve, Reference, Trajectory
 from .curves import Circle, FigureEight, Line, Sinusoid
 from .paths import PiecewisePath, polyline_path, square

@@ -1,4 +1,4 @@
-"""The reference signal and the trajectory protocol (SPEC 2.1)."""
+"""The reference signal and the trajectory protocol (model.md §2.1)."""
 from __future__ import annotations
 
 from typing import NamedTuple, Protocol

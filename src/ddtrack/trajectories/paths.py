@@ -1,4 +1,4 @@
-"""Piecewise paths of straight segments and circular arcs at constant speed: the square (SPEC 4.3)
+"""Piecewise paths of straight segments and circular arcs at constant speed: the square (model.md §4.3)
 and waypoint lists with rounded corners.
 
 Sharp corners (radius 0) give a heading jump with omega_r = 0 there: the jump is not represented
@@ -112,7 +112,7 @@ def polyline_path(points: Sequence[Sequence[float]], *, speed: float, corner_rad
 
 def square(*, corner: Sequence[float] = (10.0, 0.0), side: float = 10.0, speed: float = 0.5,
            corner_radius: float = 0.0) -> PiecewisePath:
-    """The paper's square (SPEC 4.3): corners C0 = corner, C0 + (S, 0), C0 + (S, S), C0 + (0, S),
+    """The paper's square (model.md §4.3): corners C0 = corner, C0 + (S, 0), C0 + (S, S), C0 + (0, S),
     counter-clockwise from C0 with heading 0, repeating every lap of 4S/v_r (sharp corners).
 
     With ``corner_radius`` r_c > 0 the corners C1, C2, C3 are filleted (lap length 4S - 6 r_c + 3 pi r_c / 2).

@@ -28,7 +28,7 @@ class SampledTrajectory:
 def unicycle_reference(speed: Callable[[Array], Array], yaw_rate: Callable[[Array], Array], *, duration: float,
                        step: float, substeps: int = 10, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
                        ) -> SampledTrajectory:
-    """The virtual unicycle q_r' = S(q_r) (v_r(t), omega_r(t)) (SPEC 2.1) from ``pose`` at t = 0,
+    """The virtual unicycle q_r' = S(q_r) (v_r(t), omega_r(t)) (model.md §2.1) from ``pose`` at t = 0,
     integrated by RK4 with ``substeps`` per ``step`` and tabulated every ``step`` [s]."""
     n = round(duration / step) + 1
     h = step / substeps

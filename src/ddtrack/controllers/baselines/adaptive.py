@@ -6,7 +6,7 @@ that estimates the unknown inertial parameters online with a Lyapunov-based upda
 is Slotine & Li's adaptive robot controller ("Applied Nonlinear Control", 1991, ch. 9) at velocity
 level: tau = B_bar^-1 (Y p_hat + K_D e_c), e_c = nu_c - nu, with a regressor Y of the command (nu_c,
 nu_c_dot) rather than of the feedback, and p_hat_dot = Gamma Y^T e_c; here with the regressor of our
-reduced model (SPEC 1.3).
+reduced model (model.md §1.3).
 
 Linear parametrisation. With the centre-of-mass offset d, R and L known, and p = (m, I_C, b_w)::
 
@@ -15,7 +15,7 @@ Linear parametrisation. With the centre-of-mass offset d, R and L known, and p =
          [d^2 w_c_dot + d w v_c,      w_c_dot,  2 L^2 w_c / R^2]]
 
 since M_bar = diag(m, I_C + m d^2), V_bar(nu) = m d [[0, -w], [w, 0]] and F_bar_visc(nu) = D nu,
-D = b_w (2 / R^2) diag(1, L^2), for viscous wheel friction (SPEC 1.2, 1.3).
+D = b_w (2 / R^2) diag(1, L^2), for viscous wheel friction (model.md §1.2, 1.3).
 
 Control, with e = nu - nu_c and K_D = M_bar_nominal K_c (the inner bandwidth K_c [1/s] of eq. 11 on the
 nominal model)::
@@ -33,7 +33,7 @@ skew-symmetric so e^T V_bar e = 0)::
 
 and the choice p_hat_dot = -Gamma Y^T e cancels the cross term: V_dot = -e^T (D + K_D) e <= 0, so e -> 0
 and p_hat stays bounded; p_hat -> p when Y is persistently exciting. (With f, e^T f cancels the
-cross term of the kinematic Lyapunov function, eq. 13 and SPEC 2.4, as in Fukao et al.) The
+cross term of the kinematic Lyapunov function, eq. 13 and model.md §2.4, as in Fukao et al.) The
 regressor holds no feedback term, so a velocity error cannot drift the estimates by itself.
 Integrated once per control period (explicit Euler) and projected onto the box [p_min, p_max]: for
 diagonal Gamma, clipping is the projection, which keeps V_dot <= 0 when p lies in the box (parameter

@@ -4,15 +4,15 @@ The law of WPILib's ``LTVUnicycleController`` (T. Veness, *Controls Engineering 
 theorem 8.9.1), here solved on line for the current v_r instead of read from a table. One control
 period::
 
-    e      = posture_error(y, ref)                                 SPEC 2.2, robot frame
+    e      = posture_error(y, ref)                                 model.md §2.2, robot frame
     v_l    = v_r, or min_velocity where |v_r| < min_velocity       keeps e_y controllable
-    A, B   = [[0,0,0],[0,0,v_l],[0,0,0]], [[1,0],[0,0],[0,1]]       Kanayama error dynamics (SPEC 2.3)
+    A, B   = [[0,0,0],[0,0,v_l],[0,0,0]], [[1,0],[0,0],[0,1]]       Kanayama error dynamics (model.md §2.3)
                                                                    linearised at e = 0, omega_r terms dropped
     A_d, B_d = I + A T_c, (T_c I + A T_c^2 / 2) B                  exact zero-order hold (A^2 = 0)
     P      = DARE(A_d, B_d, Q, R), Q = diag(1/q_tol^2), R = diag(1/r_tol^2)    Bryson's rule
     K      = (R + B_d' P B_d)^-1 B_d' P A_d
     nu_c   = clamp((v_r, omega_r) + K e)
-    nu_c_dot = (v_r_dot, omega_r_dot) + K e_dot, e_dot of SPEC 2.3 with the measured nu, K held
+    nu_c_dot = (v_r_dot, omega_r_dot) + K e_dot, e_dot of model.md §2.3 with the measured nu, K held
 
 The DARE is solved by a fixed number of structure-preserving doubling steps (SDA; Chu, Fan, Lin and
 Wang, "Structure-preserving algorithms for periodic discrete-time algebraic Riccati equations",
@@ -81,7 +81,7 @@ class LTVUnicycleLQR:
     ``q_tolerance`` = tolerated (e_x [m], e_y [m], e_theta [rad]), ``r_tolerance`` = tolerated correction
     (v [m/s], omega [rad/s]): Q = diag(1/q_tol^2), R = diag(1/r_tol^2) (Bryson's rule). Below
     ``min_velocity`` [m/s] the model is linearised at ``min_velocity`` (WPILib: 1e-4), where (A, B)
-    would lose e_y. nu_c_dot holds K over the period, as SPEC 2.5 does for gains: a finite difference
+    would lose e_y. nu_c_dot holds K over the period, as model.md §2.5 does for gains: a finite difference
     would be late by a period and spike at corners. Stateless.
     """
 

@@ -14,7 +14,7 @@ sequence U = (tau_0 .. tau_{H-1}) kept in memory, each tau_i held for ``model_st
     U         = sum_k w_k V_k;  apply tau = U_0
     U         <- U shifted by T_c (linear interpolation between elements; the last one is held)
 
-Model: the nominal reduced dynamics (SPEC 1.3, ``body_acceleration`` with zero disturbance, the
+Model: the nominal reduced dynamics (model.md §1.3, ``body_acceleration`` with zero disturbance, the
 nominal friction) integrated by semi-implicit Euler at dt. Cost, against the reference trajectory
 itself at t + dt, .. t + H dt (a tracking MPC previews the reference, as Nav2's MPPI previews its
 path), with e_p the position error, e_th the wrapped heading error and e_nu = nu - nu_r::

@@ -36,7 +36,7 @@ What differs from Nav2, and why:
 
 * Nav2 follows a *path* at a set speed; here the reference is a time law, so the carrot search starts at
   the reference point of time t (not at the path point nearest the robot) and the desired speed keeps
-  pace with it: v_d = v_r + k_s e_x, e_x the along-track error of SPEC 2.2 (positive: reference ahead),
+  pace with it: v_d = v_r + k_s e_x, e_x the along-track error of model.md §2.2 (positive: reference ahead),
   so the along-track error decays at rate k_s (``pace_gain``) instead of growing without bound.
 * The floor of step 5 is capped at v_d, so a robot ahead of its reference (v_d = 0) can wait for it;
   Nav2 always floors at ``regulated_linear_scaling_min_speed``.
@@ -47,7 +47,7 @@ What differs from Nav2, and why:
 
 The command's derivative nu_c_dot handed to the inner loop is 0: pure pursuit is a kinematic law with no
 analytic derivative, and a backward difference over one period spikes whenever the carrot jumps (a
-square corner, entering or leaving the rotation in place), the reason SPEC 2.5 prefers analytic rates.
+square corner, entering or leaving the rotation in place), the reason model.md §2.5 prefers analytic rates.
 On a line or a circle at constant speed the true derivative is 0 anyway.
 """
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Backstepping over a sliding-mode velocity loop, in the manner of Slotine and Li, *Applied Nonlinear
 Control* (1991), sec. 7.1-7.2 (the switching law and its boundary layer), applied to the reduced
-dynamics M_bar nu_dot + V_bar(nu) nu + F_bar + tau_bar_d = B_bar tau of SPEC 1.3 as in Fierro and
+dynamics M_bar nu_dot + V_bar(nu) nu + F_bar + tau_bar_d = B_bar tau of model.md §1.3 as in Fierro and
 Lewis, "Control of a nonholonomic mobile robot: backstepping kinematics into dynamics" (1997). The
 outer law is Kanayama's (paper eq. 12); this module is the inner law::
 
