@@ -178,6 +178,17 @@ def test_waypoints_file_is_read_relative_to_the_scenario():
     assert scenario.trajectory.points[0] == (0.0, 0.0) and len(scenario.trajectory.points) == 6
 
 
+def test_a_waypoints_file_may_carry_comments_and_blank_lines(tmp_path):
+    from ddtrack.scenario import read_waypoints
+
+    path = tmp_path / "route.csv"
+    path.write_text("# my lab's corridor, measured 2026-11-20\n#\n\nx,y\n0,0\n# the door\n4,0\n\n4,3\n")
+    assert read_waypoints(path) == [(0.0, 0.0), (4.0, 0.0), (4.0, 3.0)]
+    path.write_text("x,y\n0,0\ny,x\n")  # a second header after the points is an error, naming its line
+    with pytest.raises(ValueError, match="line 3"):
+        read_waypoints(path)
+
+
 def test_every_section_rejects_unknown_keys():
     for section, model in Scenario.model_fields.items():
         if section in ("name", "description", "trajectory", "disturbance", "controller"):

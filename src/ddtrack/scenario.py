@@ -405,7 +405,8 @@ def _contained(base: Path, name: str) -> Path:
 
 
 def read_waypoints(path: Path) -> list[Pair]:
-    """Read x,y rows from a CSV file (one optional header line)."""
+    """Read x,y rows from a CSV file: ``#`` comment lines and blank lines anywhere, then one optional header line
+    before the first point (``x,y``)."""
     try:
         text = read_input(path).decode("utf-8")
     except FileNotFoundError:
@@ -414,16 +415,17 @@ def read_waypoints(path: Path) -> list[Pair]:
         raise ValueError(f"waypoints file '{path}' is not UTF-8 text; give a CSV of x,y rows") from None
     except OSError as exc:
         raise ValueError(f"waypoints file '{path}' cannot be read ({exc.strerror})") from None
-    points = []
+    points, header_seen = [], False
     for number, row in enumerate(csv.reader(text.splitlines()), start=1):
-        if not row or all(not cell.strip() for cell in row):
-            continue
+        if not row or all(not cell.strip() for cell in row) or row[0].lstrip().startswith("#"):
+            continue  # a blank line or a comment
         try:
             if len(row) != 2:
                 raise ValueError
             points.append((float(row[0]), float(row[1])))
         except ValueError:
-            if number == 1 and not points:
+            if not points and not header_seen:
+                header_seen = True
                 continue  # a header line
             raise ValueError(f"waypoints file '{path}' line {number}: expected two numbers 'x,y', "
                              f"got {','.join(row)[:40]!r}") from None
