@@ -52,3 +52,14 @@ def test_relative_links_land(path):
         assert linked.exists(), f"{path.name}: {target}"
         if anchor and linked.suffix == ".md":
             assert anchor in anchors(linked.read_text()), f"{path.name}: {target}"
+
+
+def test_the_guide_documents_velocity_command_plotting_and_completion():
+    from ddtrack import plotting
+    from ddtrack.controllers import VelocityCommand
+
+    guide = (ROOT / "docs" / "guide.md").read_text()
+    assert all(f"| `{field}` |" in guide for field in VelocityCommand._fields)
+    public = [name for name in dir(plotting) if name.startswith("plot_")]
+    assert public and all(f"`{name}(" in guide for name in public)
+    assert "_DDTRACK_COMPLETE=bash_source ddtrack" in guide
