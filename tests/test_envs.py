@@ -231,8 +231,6 @@ def test_bad_arguments_are_config_errors_naming_the_argument():
         DiffDriveTrackingEnv(PAPER_LINE, action_mode="gain")
     with pytest.raises(ddtrack.ConfigError, match="action_mode.*controller.kind is 'mppi'"):
         DiffDriveTrackingEnv(ddtrack.load_scenario(PAPER_LINE, controller="mppi"), action_mode="gains")
-    with pytest.raises(ddtrack.ConfigError, match="scenario: is required"):
-        DiffDriveTrackingEnv(action_mode="torque")
     with pytest.raises(ddtrack.ConfigError, match="does not exist"):
         gymnasium.make(ENV_ID, scenario="no_such_scenario.toml")
     with pytest.raises(ddtrack.ConfigError, match="effort_weight"):
@@ -254,3 +252,35 @@ def test_an_nn_adaptive_scenario_runs_as_backstepping_with_its_own_gain_bounds()
     assert env.scenario.controller.inner == scenario.controller.inner
     np.testing.assert_array_equal(env.observation_space.high[8:], np.float32([5.0, 100.0, 20.0]))
 
+
+def test_make_with_no_arguments_runs_the_default_scenario_and_passes_check_env():
+    env = gymnasium.make(ENV_ID)  # Gymnasium's convention: no argument needed
+    try:
+        assert env.unwrapped.scenario.name == "training"
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+def test_on_the_default_every_seed_is_a_different_episode():
+    env = DiffDriveTrackingEnv()
+    episodes = []
+    for seed in (0, 1):
+        env.reset(seed=seed)
+        episodes.append([env.step(np.zeros(2))[1] for _ in range(50)])
+    assert episodes[0] != episodes[1]  # another plant, disturbance and noise: another episode
+    again = DiffDriveTrackingEnv()
+    again.reset(seed=0)
+    assert [again.step(np.zeros(2))[1] for _ in range(50)] == episodes[0]  # and the same seed, the same one
+
+
+def test_on_a_paper_scenario_the_seed_changes_nothing():
+    # documented loudly (docs/guide.md, "What a seed changes"): the paper's cases have no randomness
+    env = DiffDriveTrackingEnv(PAPER_LINE)
+    rollouts = []
+    for seed in (0, 1):
+        env.reset(seed=seed)
+        rollouts.append([env.step(np.zeros(2))[1] for _ in range(20)])
+    assert rollouts[0] == rollouts[1]

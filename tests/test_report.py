@@ -96,7 +96,8 @@ def reproduce_folder(tmp_path_factory):
     half a minute; ``ddtrack reproduce`` itself is tested in test_cli), with PNG figures beside it."""
     import matplotlib.pyplot as plt
 
-    from ddtrack.reproduce import CASES, CaseResult, scenario_path, summarise_case
+    from ddtrack.reproduce import CASES, CaseResult, summarise_case
+    from ddtrack.shipped import scenario_path
     from ddtrack.scenario import load_scenario
 
     out = tmp_path_factory.mktemp("report_reproduce")

@@ -24,6 +24,7 @@ from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
 from .outdir import atomic_write
 from .runner import prepare, run_setup
 from .scenario import Scenario, load_scenario
+from .shipped import scenario_path
 from .sim import timeseries
 
 #: The paper's Table 1: mean tracking error [m] and improvement [%] (its 52.04 % rounds to 52.05).
@@ -46,15 +47,6 @@ ABLATIONS = {
     "nn_no_online_learning": [*NN, "controller.online_learning=false"],
     "nn_learn_saturated": [*NN, "controller.learn_saturated=true"],
 }
-
-
-def scenario_path(name: str) -> Path:
-    """A shipped scenario: inside the installed package, or in the source checkout's ``scenarios/``."""
-    here = Path(__file__).resolve().parent
-    for folder in (here / "_scenarios", here.parents[1] / "scenarios"):
-        if (folder / f"{name}.toml").is_file():
-            return folder / f"{name}.toml"
-    raise FileNotFoundError(f"shipped scenario {name}.toml not found beside the package")
 
 
 @dataclass

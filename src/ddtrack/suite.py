@@ -26,7 +26,7 @@ import pyarrow.parquet as pq
 from .errors import ConfigError
 from ._format import significant, with_interval
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
-from .reproduce import scenario_path
+from .shipped import scenario_path
 from .outdir import atomic_write
 from .scenario import CONTROLLERS, load_scenario
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value

@@ -82,9 +82,11 @@ from ..geometry import posture_error
 from ..model import DynamicPlant
 from ..runner import prepare
 from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, load_scenario
+from ..shipped import scenario_path
 from ..sim import STATUS_NAMES, Draws, period_status, plant_period
 
 ACTION_MODES = ("torque", "gains")
+DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
 GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
 DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] at which a run diverges (simulate's default, as in a run)
@@ -354,9 +356,8 @@ def scenario_gain_bounds(scenario: Scenario) -> tuple[tuple[float, float, float]
 def _load(scenario: Any) -> Scenario:
     if isinstance(scenario, Scenario):
         return scenario
-    if scenario is None:
-        raise ConfigError("scenario", "is required", "pass a scenario file, e.g. scenario='scenarios/paper_line.toml', "
-                          "or a ddtrack.Scenario")
+    if scenario is None:  # Gymnasium's convention: make(ENV_ID) with no arguments works
+        return load_scenario(scenario_path(DEFAULT_SCENARIO))
     if not isinstance(scenario, (str, PathLike)):
         raise ConfigError("scenario", f"expected a path or a ddtrack.Scenario, got {type(scenario).__name__}")
     return load_scenario(scenario)
