@@ -70,8 +70,9 @@ def test_a_warm_run_needs_few_programs_and_the_cache_answers_each(tmp_path):
     log = compile_log(tmp_path / "cache", tmp_path / "warm")
     programs = [line for line in log.splitlines() if "Compiling " in line]
     hits = [line for line in log.splitlines() if "Persistent compilation cache hit" in line]
-    # the draws, the initial state's conversion, the simulation: each small eager dispatch is a program of its own
-    assert 1 <= len(programs) <= 3, "\n".join(programs)
+    # the reference sampled for the load-time checks, the draws, the initial state's conversion, the simulation:
+    # each small eager dispatch would be a program of its own
+    assert 1 <= len(programs) <= 4, "\n".join(programs)
     assert len(hits) == len(programs), log  # the cold run, exited fast, left every entry behind
     assert (tmp_path / "warm" / "metrics.json").stat().st_size > 0
     assert json.loads((tmp_path / "warm" / "metrics.json").read_text())["status"] == "ok"

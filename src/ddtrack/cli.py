@@ -42,12 +42,12 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     """Simulate SCENARIO once and write a run folder."""
     from .scenario import load_scenario
 
+    enable_compilation_cache()  # loading already compiles: the reference is sampled for the feasibility checks
     spec = load_scenario(scenario, overrides=overrides, seed=seed, controller=controller)
     folder = out if out is not None else Path("runs") / folder_name(spec.name)
     from .outdir import check_output, staged_folder
 
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
-    enable_compilation_cache()
     from .rundir import write_run
     from .feasibility import check
     from .runner import needs_identification, prepare, run_metrics, run_setup, traction_columns

@@ -22,17 +22,33 @@ MAX_SAMPLES = 20_001
 GYRATION_RANGE = (0.05, 20.0)
 
 
-def sample_reference(trajectory: Any, duration: float, control_period: float) -> Any:
-    """The reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
+_SAMPLES: dict[tuple, Any] = {}  # the last few scenarios' samples: loading checks them, runs reuse them
+
+
+def _sampler():
     import jax
 
-    samples = min(MAX_SAMPLES, int(duration / control_period) + 1)
-    return jax.tree_util.tree_map(np.asarray, jax.vmap(trajectory)(np.linspace(0.0, duration, samples)))
+    return jax.jit(lambda trajectory, t: jax.vmap(trajectory)(t))  # one program, kept by the persistent cache
 
 
-def reference_peaks(trajectory: Any, duration: float, control_period: float) -> tuple[float, float]:
-    """Largest |v_r| [m/s] and |omega_r| [rad/s] of ``trajectory`` sampled every control period over the run."""
-    reference = sample_reference(trajectory, duration, control_period)
+def sample_reference(scenario: Any) -> Any:
+    """The scenario's reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
+    import jax
+
+    sim = scenario.simulation
+    key = (scenario.trajectory.model_dump_json(), sim.duration, sim.control_period)
+    if key not in _SAMPLES:
+        samples = min(MAX_SAMPLES, int(sim.duration / sim.control_period) + 1)
+        reference = _sampler()(scenario.trajectory.build(), np.linspace(0.0, sim.duration, samples))
+        if len(_SAMPLES) >= 8:
+            _SAMPLES.pop(next(iter(_SAMPLES)))
+        _SAMPLES[key] = jax.tree_util.tree_map(np.asarray, reference)
+    return _SAMPLES[key]
+
+
+def reference_peaks(scenario: Any) -> tuple[float, float]:
+    """Largest |v_r| [m/s] and |omega_r| [rad/s] of the scenario's reference, sampled every control period."""
+    reference = sample_reference(scenario)
     return float(np.max(np.abs(reference.v))), float(np.max(np.abs(reference.omega)))
 
 
@@ -40,8 +56,7 @@ def divergence_bound(scenario: Any) -> float:
     """The tracking error [m] beyond which a run has diverged, scaled with the scenario: 3 (e_0 + extent + 2 L),
     e_0 the initial distance to the reference, extent the farthest the reference goes from its start, L the half
     axle. A fixed 50 m let a Burger on a 0.5 m circle wander 50 m before it counted as lost."""
-    sim = scenario.simulation
-    reference = sample_reference(scenario.trajectory.build(), sim.duration, sim.control_period)
+    reference = sample_reference(scenario)
     start = scenario.initial.pose if scenario.initial.pose is not None else (reference.x[0], reference.y[0])
     initial = math.hypot(start[0] - reference.x[0], start[1] - reference.y[0])
     extent = float(np.max(np.hypot(reference.x - reference.x[0], reference.y - reference.y[0])))
@@ -105,5 +120,4 @@ def check(scenario: Any) -> list[dict]:
     """Run every check on a validated scenario; return the warnings (raise :class:`ConfigError` on a refusal)."""
     check_angles(scenario)
     check_units(scenario)
-    sim = scenario.simulation
-    return check_clamps(scenario, reference_peaks(scenario.trajectory.build(), sim.duration, sim.control_period))
+    return check_clamps(scenario, reference_peaks(scenario))
