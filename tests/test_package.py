@@ -31,6 +31,7 @@ LAYERS = [
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep"},
     {"suite"},
+    {"cluster"},
     {"cli"},
 ]
 def _short(seconds: int) -> list[str]:

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from ._after_import import after_import
+from .cluster import check_cluster_options, cluster_options, dask_client
 from .errors import ConfigError, RunError
 
 LISTS = ("controllers", "trajectories", "disturbances")
@@ -280,20 +281,6 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     return 0
 
 
-def cluster_options(command: Callable) -> Callable:
-    """The options that choose where ``sweep`` and ``bench`` run: ``--scheduler``, ``--scheduler-file``, ``--workers``."""
-    options = [
-        click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tls://10.0.0.5:8786."),
-        click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
-                     help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file)."),
-        click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
-                     help="Worker processes of the embedded local cluster [default: CPU count]."),
-    ]
-    for option in reversed(options):  # decorators apply bottom-up: keep the options in this order in --help
-        command = option(command)
-    return command
-
-
 @cli.command(short_help='Run a parameter sweep (SWEEP.toml) on Dask, resumably.')
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), required=True,
@@ -313,7 +300,7 @@ def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, s
     plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing
     from .outdir import check_output, start_resumable
 
-    study = plan_identity(plan.runs)
+    study = plan.identity()
     resume = check_output(out, command="sweep", overwrite=overwrite, study=study)  # the same sweep resumes
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(len(plan.runs), "runs") as advance:
         start_resumable(out, command="sweep", study=study, resume=resume)
@@ -408,50 +395,6 @@ def report(folder: Path, out: Path | None) -> int:
 
     click.echo(f"wrote {write_report(folder, out=out)}")
     return 0
-
-
-def plan_identity(keys) -> str:
-    """A short fingerprint of a sweep's runs: a folder resumes only the sweep that wrote it."""
-    import hashlib
-
-    return hashlib.sha256("\n".join(sorted(keys)).encode()).hexdigest()[:16]
-
-
-def check_cluster_options(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> None:
-    """Reject contradictory cluster options of ``sweep`` and ``bench`` before anything runs (exit code 2)."""
-    if scheduler is not None and scheduler_file is not None:
-        raise ConfigError("--scheduler", "give --scheduler or --scheduler-file, not both")
-    if workers is not None and (scheduler is not None or scheduler_file is not None):
-        raise ConfigError("--workers", "only applies to the embedded cluster",
-                          "start workers on the cluster with `dask worker` instead")
-    if scheduler_file is not None and not scheduler_file.is_file():
-        raise ConfigError("--scheduler-file", f"'{scheduler_file}' does not exist",
-                          "start the scheduler with `dask scheduler --scheduler-file FILE` first")
-
-
-@contextmanager
-def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int | None) -> Iterator[object]:
-    """A client of the given scheduler, or of an embedded cluster on 127.0.0.1 (closed on exit)."""
-    from distributed import Client
-
-    from .sweep import local_cluster
-
-    cluster = None
-    try:
-        if scheduler is not None or scheduler_file is not None:
-            try:
-                client = Client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
-                                timeout="20s")
-            except (OSError, TimeoutError) as exc:
-                raise RunError(f"cannot reach the Dask scheduler ({exc})") from None
-        else:
-            cluster = local_cluster(workers or os.cpu_count() or 1)
-            client = Client(cluster)
-        with client:
-            yield client
-    finally:
-        if cluster is not None:
-            cluster.close()
 
 
 @contextmanager

@@ -192,6 +192,10 @@ class Plan:
     runs: dict[str, tuple[int, int]]  #: key -> (configuration index, seed), in plan order
     chunk: int  #: runs per task (every task of the sweep is padded to this many, so each compiles once)
 
+    def identity(self) -> str:
+        """A short fingerprint of the plan's runs: an output folder resumes only the sweep that wrote it."""
+        return hashlib.sha256("\n".join(sorted(self.runs)).encode()).hexdigest()[:16]
+
 
 def toml_value(value: Any) -> str:
     """A value as inline TOML, the form ``--set`` overrides are read in."""
