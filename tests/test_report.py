@@ -336,7 +336,7 @@ def _payload_mc(tmp_path: Path) -> Path:
     def row(seed: int, error: float, gains: list[float] | None) -> dict:
         return {"seed": seed, "status": "ok", "window": [0.0, 2.0], "e_tr_mean": error, "e_tr_rms": error,
                 "e_tr_max": 2 * error, "e_tr_final": error, "settling_time": 1.0, "effort": 3.0,
-                "saturation_fraction": 0.0, "final_gains": gains}
+                "saturation_fraction": 0.0, "final_gains": gains, "warnings": [{"code": "c", "message": PAYLOAD}]}
 
     rows = {"backstepping": [row(s, 0.05, [1.0, 55.0, 15.0]) for s in range(3)],
             PAYLOAD: [row(s, 0.02 + 0.001 * s, [2.0 + s, 50.0, 10.0]) for s in range(3)]}
