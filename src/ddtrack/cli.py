@@ -50,7 +50,6 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
 
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     from .rundir import write_run
-    from .feasibility import check
     from .runner import needs_identification, prepare, run_metrics, run_setup, traction_columns
     from .sim import remedy, timeseries
 
@@ -65,7 +64,6 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     sim = spec.simulation
     nmse = None if setup.identification is None else setup.identification.nmse
     metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
-    metrics["warnings"] = [*check(spec), *metrics["warnings"]]  # the scenario's own, then the run's
     identification = None
     if setup.identification is not None:
         found = setup.identification

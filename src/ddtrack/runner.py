@@ -18,6 +18,7 @@ import numpy as np
 from jax import Array
 
 from ._format import significant
+from . import feasibility
 from .adaptation import adaptation_warnings
 from .identification import Identification, identify
 from .metrics import summarize, tracking_error
@@ -268,11 +269,11 @@ def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
 
 
 def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) -> list[dict]:
-    """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: grip no floor could
-    give (:func:`traction_warnings`), and the NN-adaptive controller's adaptation that could not work
-    (:func:`ddtrack.adaptation.adaptation_warnings`; ``nmse``, the emulator's identification NMSE per output, or
-    None)."""
-    return [*traction_warnings(scenario, metrics),
+    """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: a reference near the
+    clamps (:func:`ddtrack.feasibility.check`), grip no floor could give (:func:`traction_warnings`), and the
+    NN-adaptive controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`;
+    ``nmse``, the emulator's identification NMSE per output, or None)."""
+    return [*feasibility.check(scenario), *traction_warnings(scenario, metrics),
             *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse])]
 
 
