@@ -10,6 +10,7 @@ this measures the control loop itself, emulator training and gain law included. 
 devices (default: one per core, as the ``ddtrack`` command does), over which the batch is split.
 Compile is excluded (one warm-up call per batch size); the figure is the best of ``repeats`` timed calls.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -17,7 +18,7 @@ import json
 import os
 import platform
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,15 +50,22 @@ def throughput(kind: str, size: int, repeats: int, series: bool = False) -> dict
         call()
         times.append(time.perf_counter() - start)
     best = min(times)
-    return {"controller": kind, "batch": size, "series": series, "compile_and_first_s": compile_s, "best_s": best,
-            "robot_steps_per_s": size * scenario.simulation.n_steps / best}
+    return {
+        "controller": kind,
+        "batch": size,
+        "series": series,
+        "compile_and_first_s": compile_s,
+        "best_s": best,
+        "robot_steps_per_s": size * scenario.simulation.n_steps / best,
+    }
 
 
 def best_throughput(sizes: list[int], repeats: int, series: bool = False) -> dict:
     """Every (controller, size) row, and the best size per controller."""
     rows = [throughput(kind, size, repeats, series) for kind in KINDS for size in sizes]
-    best = {kind: max((r for r in rows if r["controller"] == kind), key=lambda r: r["robot_steps_per_s"])
-            for kind in KINDS}
+    best = {
+        kind: max((r for r in rows if r["controller"] == kind), key=lambda r: r["robot_steps_per_s"]) for kind in KINDS
+    }
     return {"rows": rows, "best": best}
 
 
@@ -72,17 +80,24 @@ def main() -> None:
     import jax
 
     jax.config.update("jax_num_cpu_devices", args.devices)  # before JAX's first operation
-    report = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "python": platform.python_version(),
-              "jax": jax.__version__, "cores": len(os.sched_getaffinity(0)), "devices": len(jax.devices()),
-              "load_average_start": list(os.getloadavg())}
+    report = {
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "cores": len(os.sched_getaffinity(0)),
+        "devices": len(jax.devices()),
+        "load_average_start": list(os.getloadavg()),
+    }
     report |= best_throughput([int(s) for s in args.sizes.split(",")], args.repeats, args.series)
     report["load_average_end"] = list(os.getloadavg())
     if args.json:
         print(json.dumps(report, indent=2))
         return
     for r in report["rows"]:
-        print(f"{r['controller']:<26} batch {r['batch']:>5}: {r['best_s']:7.3f} s, "
-              f"{r['robot_steps_per_s'] / 1e6:6.2f} M robot-steps/s (compile+first {r['compile_and_first_s']:.1f} s)")
+        print(
+            f"{r['controller']:<26} batch {r['batch']:>5}: {r['best_s']:7.3f} s, "
+            f"{r['robot_steps_per_s'] / 1e6:6.2f} M robot-steps/s (compile+first {r['compile_and_first_s']:.1f} s)"
+        )
 
 
 if __name__ == "__main__":

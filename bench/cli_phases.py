@@ -12,6 +12,7 @@ first line to the run folder written (interpreter start-up excluded; ``ddtrack``
 ``compiles`` counts the XLA programs the run needed and ``cache_hits`` how many of them the persistent
 compilation cache answered (run twice with the same ``--cache``: the second run is warm).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -82,8 +83,14 @@ def phases(scenario: Path, out: Path) -> dict[str, float | int]:
 
     columns = timeseries(result)
     sim = spec.simulation
-    metrics = summarize(columns, status=result.status_name, window=sim.window, control_period=sim.control_period,
-                        settling_threshold=sim.settling_threshold, failure_time=result.failure_time)
+    metrics = summarize(
+        columns,
+        status=result.status_name,
+        window=sim.window,
+        control_period=sim.control_period,
+        settling_threshold=sim.settling_threshold,
+        failure_time=result.failure_time,
+    )
     lap("metrics_s")
     from ddtrack.rundir import write_run
 
@@ -107,9 +114,12 @@ def figures_time(spec, columns, metrics) -> float:
 
     start = time.perf_counter()
     window = tuple(metrics["window"])
-    for fig in (plotting.plot_path(columns, title=spec.name), plotting.plot_states(columns),
-                plotting.plot_errors(columns, window=window),
-                plotting.plot_torques(columns, max_torque=spec.plant_params().max_torque)):
+    for fig in (
+        plotting.plot_path(columns, title=spec.name),
+        plotting.plot_states(columns),
+        plotting.plot_errors(columns, window=window),
+        plotting.plot_torques(columns, max_torque=spec.plant_params().max_torque),
+    ):
         fig.savefig(io.BytesIO(), format="png", dpi=110)
         plt.close(fig)
     return time.perf_counter() - start

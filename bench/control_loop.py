@@ -39,6 +39,7 @@ accurate than ddtrack; docs/benchmarks.md ("python-control") has the table.
     import control_loop
     control_loop.time_control(5)   # {"control_bs_s": ..., "control_max_abs_state_difference": ..., ...}
 """
+
 from __future__ import annotations
 
 import argparse
@@ -56,8 +57,14 @@ import ddtrack
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from python_loop import (  # noqa: E402
-    backstepping_step, clamp, derivative, line_reference, params_from_scenario, run_backstepping)
+from python_loop import (
+    backstepping_step,
+    clamp,
+    derivative,
+    line_reference,
+    params_from_scenario,
+    run_backstepping,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "paper_line.toml"
@@ -91,17 +98,28 @@ def systems(params: dict) -> tuple:
         tau, _ = step(t, y.tolist(), line_reference(line, t), ())
         return [clamp(tau[0], robot.max_torque), clamp(tau[1], robot.max_torque)]  # the plant's limit, as ddtrack
 
-    plant = ct.nlsys(plant_rhs, None, name="plant", inputs=["tau_r", "tau_l", "dist_r", "dist_l"],
-                     states=["x", "y", "theta", "v", "omega"])
-    controller = ct.nlsys(None, control_law, name="controller", inputs=["x", "y", "theta", "v", "omega"],
-                          outputs=["tau_r", "tau_l"], dt=params["control_period"])
+    plant = ct.nlsys(
+        plant_rhs,
+        None,
+        name="plant",
+        inputs=["tau_r", "tau_l", "dist_r", "dist_l"],
+        states=["x", "y", "theta", "v", "omega"],
+    )
+    controller = ct.nlsys(
+        None,
+        control_law,
+        name="controller",
+        inputs=["x", "y", "theta", "v", "omega"],
+        outputs=["tau_r", "tau_l"],
+        dt=params["control_period"],
+    )
     return plant, controller
 
 
 def disturbance_at(params: dict, t: float) -> tuple[float, float]:
     """Wheel-torque disturbance at t [N m], held over the period like the torque (as in python_loop.simulate)."""
     d = params["disturbance"]
-    return tuple(b + a * math.sin(d.frequency * t + p) for b, a, p in zip(d.bias, d.amplitude, d.phase))
+    return tuple(b + a * math.sin(d.frequency * t + p) for b, a, p in zip(d.bias, d.amplitude, d.phase, strict=True))
 
 
 def simulate(params: dict, *, method: str = METHOD, rtol: float = RTOL, atol: float = ATOL) -> np.ndarray:
@@ -118,8 +136,9 @@ def simulate(params: dict, *, method: str = METHOD, rtol: float = RTOL, atol: fl
         t = k * period
         states[k] = x
         held = [*controller.output(t, [], x), *disturbance_at(params, t)]
-        response = ct.input_output_response(plant, [t, t + period], np.column_stack([held, held]), x,
-                                            solve_ivp_method=method, solve_ivp_kwargs=solver)
+        response = ct.input_output_response(
+            plant, [t, t + period], np.column_stack([held, held]), x, solve_ivp_method=method, solve_ivp_kwargs=solver
+        )
         x = response.states[:, -1]
     return states
 
@@ -132,8 +151,9 @@ def reference(params: dict) -> np.ndarray:
 
 def paper_line(duration: float | None = None):
     """scenarios/paper_line.toml, optionally shortened to ``duration`` seconds (for the test)."""
-    overrides = [] if duration is None else [f"simulation.duration={duration}",
-                                             f"simulation.metric_window=[0.0, {duration}]"]
+    overrides = (
+        [] if duration is None else [f"simulation.duration={duration}", f"simulation.metric_window=[0.0, {duration}]"]
+    )
     return ddtrack.load_scenario(SCENARIO, overrides=overrides)
 
 
@@ -152,8 +172,9 @@ def timings(fn, repeats: int) -> list[float]:
     return times
 
 
-def time_control(repeats: int, *, ddtrack_result: np.ndarray | None = None,
-                 reference_result: np.ndarray | None = None) -> dict:
+def time_control(
+    repeats: int, *, ddtrack_result: np.ndarray | None = None, reference_result: np.ndarray | None = None
+) -> dict:
     """Median and minimum wall time of ``repeats`` python-control runs of the paper line case, after one
     untimed run (the first pays one-off costs such as scipy's lazily loaded submodules), and that run's max |difference|
     from ddtrack's states (``ddtrack_result``, computed here when not given) and, when
@@ -205,17 +226,19 @@ def main(argv: list[str] | None = None) -> int:
     truth = reference(params)
     figures = time_control(args.repeats, ddtrack_result=ddtrack_result, reference_result=truth)
     single = statistics.median(ddtrack_times)
-    figures.update({
-        "ddtrack_max_abs_error_vs_reference": float(np.max(np.abs(ddtrack_result - truth))),
-        "single_bs_s": single,
-        "single_bs_min_s": min(ddtrack_times),
-        "ddtrack_repeats": args.ddtrack_repeats,
-        "python_loop_bs_s": statistics.median(python_times),
-        "ratio_control_over_ddtrack": figures["control_bs_s"] / single,
-        "ratio_control_over_ddtrack_min": figures["control_bs_min_s"] / min(ddtrack_times),
-        "load_average_start": load_start,
-        "load_average_end": load_average(),
-    })
+    figures.update(
+        {
+            "ddtrack_max_abs_error_vs_reference": float(np.max(np.abs(ddtrack_result - truth))),
+            "single_bs_s": single,
+            "single_bs_min_s": min(ddtrack_times),
+            "ddtrack_repeats": args.ddtrack_repeats,
+            "python_loop_bs_s": statistics.median(python_times),
+            "ratio_control_over_ddtrack": figures["control_bs_s"] / single,
+            "ratio_control_over_ddtrack_min": figures["control_bs_min_s"] / min(ddtrack_times),
+            "load_average_start": load_start,
+            "load_average_end": load_average(),
+        }
+    )
     if args.json:
         print(json.dumps(figures, indent=2))
     else:

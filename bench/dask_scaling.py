@@ -6,13 +6,14 @@ The paper's line case with backstepping, 4 configurations (`robot.mass` grid) x 
 task. For each worker count: start the cluster, run a small warm-up sweep (each worker compiles the task once;
 JAX's persistent cache is shared), then time the real sweep alone. Efficiency = T(1) / (2 T(2)).
 """
+
 from __future__ import annotations
 
 import argparse
 import json
 import tempfile
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,8 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def sweep_file(folder: Path, seeds: int, chunk: int) -> Path:
     path = folder / "sweep.toml"
-    path.write_text(f'scenario = "{ROOT / "scenarios" / "paper_line.toml"}"\ncontrollers = ["backstepping"]\n'
-                    f'seeds = {seeds}\nchunk = {chunk}\n[grid]\n"robot.mass" = [9.0, 10.0, 11.0, 12.0]\n')
+    path.write_text(
+        f'scenario = "{ROOT / "scenarios" / "paper_line.toml"}"\ncontrollers = ["backstepping"]\n'
+        f'seeds = {seeds}\nchunk = {chunk}\n[grid]\n"robot.mass" = [9.0, 10.0, 11.0, 12.0]\n'
+    )
     return path
 
 
@@ -50,14 +53,23 @@ def main() -> None:
     t1 = timed_sweep(1, args.seeds, args.chunk)
     t2 = timed_sweep(2, args.seeds, args.chunk)
     runs = 4 * args.seeds
-    report = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "runs": runs, "chunk": args.chunk,
-              "tasks": runs // args.chunk, "one_worker_s": t1, "two_workers_s": t2, "speedup": t1 / t2,
-              "efficiency": t1 / (2 * t2)}
+    report = {
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "runs": runs,
+        "chunk": args.chunk,
+        "tasks": runs // args.chunk,
+        "one_worker_s": t1,
+        "two_workers_s": t2,
+        "speedup": t1 / t2,
+        "efficiency": t1 / (2 * t2),
+    }
     if args.json:
         print(json.dumps(report, indent=2))
     else:
-        print(f"{runs} runs in {report['tasks']} tasks: 1 worker {t1:.1f} s, 2 workers {t2:.1f} s, "
-              f"speed-up {t1 / t2:.2f}x, efficiency {100 * report['efficiency']:.0f} %")
+        print(
+            f"{runs} runs in {report['tasks']} tasks: 1 worker {t1:.1f} s, 2 workers {t2:.1f} s, "
+            f"speed-up {t1 / t2:.2f}x, efficiency {100 * report['efficiency']:.0f} %"
+        )
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ Sweep cases run ``ddtrack sweep FILE --out DIR`` with the cluster replaced by a 
 file that reaches the cluster counts as accepted, and one refused after the cluster started would show up
 as ``bad``. Prints one table row per mutation kind; exit code 1 if any case is ``bad``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -83,11 +84,18 @@ def scenario_bases() -> list[Base]:
 def sweep_bases() -> list[Base]:
     """Two small valid sweep files (a grid and a random design) over a copy of scenarios/paper_line.toml."""
     scenario = {"scenario.toml": (SCENARIOS / "paper_line.toml").read_bytes()}
-    common = {"scenario": "scenario.toml", "controllers": ["backstepping"], "seeds": 2, "chunk": 2,
-              "set": {"simulation.duration": 1.0, "simulation.metric_window": [0.0, 1.0]}}
+    common = {
+        "scenario": "scenario.toml",
+        "controllers": ["backstepping"],
+        "seeds": 2,
+        "chunk": 2,
+        "set": {"simulation.duration": 1.0, "simulation.metric_window": [0.0, 1.0]},
+    }
     grid = common | {"grid": {"robot.mass": [9.0, 10.0], "controller.kc": [[5.0, 5.0], [10.0, 10.0]]}}
-    rand = common | {"seeds": {"start": 3, "count": 2},
-                     "random": {"n": 2, "seed": 0, "plant.mass": {"low": 8.0, "high": 14.0}}}
+    rand = common | {
+        "seeds": {"start": 3, "count": 2},
+        "random": {"n": 2, "seed": 0, "plant.mass": {"low": 8.0, "high": 14.0}},
+    }
     return [Base("sweep_grid", grid, scenario), Base("sweep_random", rand, scenario)]
 
 
@@ -123,7 +131,9 @@ def dotted(path: tuple[str, ...]) -> str:
 def numeric_leaves(data: dict) -> list[tuple[str, ...]]:
     def numeric(v: Any) -> bool:
         return (isinstance(v, int | float) and not isinstance(v, bool)) or (
-            isinstance(v, list) and bool(v) and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))
+            isinstance(v, list) and bool(v) and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+        )
+
     return [p for p in leaves(data) if numeric(get(data, p))]
 
 
@@ -158,9 +168,18 @@ def toml_bytes(data: dict) -> bytes:
     return tomli_w.dumps(data).encode()
 
 
-def mutant(kind: str, base: Base, data: dict, fields: tuple[str, ...] | list[str], *, values_only: bool = True,
-           note: str = "", overrides: tuple[str, ...] = (), extra: dict[str, bytes] | None = None,
-           folders: tuple[str, ...] = ()) -> Mutant:
+def mutant(
+    kind: str,
+    base: Base,
+    data: dict,
+    fields: tuple[str, ...] | list[str],
+    *,
+    values_only: bool = True,
+    note: str = "",
+    overrides: tuple[str, ...] = (),
+    extra: dict[str, bytes] | None = None,
+    folders: tuple[str, ...] = (),
+) -> Mutant:
     files = dict(base.extra) | (extra or {})
     files["input"] = toml_bytes(data)
     return Mutant(kind, files, overrides, tuple(fields), values_only, note, folders)
@@ -183,8 +202,9 @@ def wrong_type(rng: random.Random, base: Base) -> Mutant:
 
 
 def random_word(rng: random.Random) -> str:
-    return rng.choice(string.ascii_lowercase) + "".join(rng.choices(string.ascii_lowercase + "_" + string.digits,
-                                                                    k=rng.randint(1, 12)))
+    return rng.choice(string.ascii_lowercase) + "".join(
+        rng.choices(string.ascii_lowercase + "_" + string.digits, k=rng.randint(1, 12))
+    )
 
 
 def unknown_key(rng: random.Random, base: Base) -> Mutant:
@@ -194,8 +214,9 @@ def unknown_key(rng: random.Random, base: Base) -> Mutant:
     where = rng.choice(tables)
     key = "zz_" + random_word(rng)
     put(data, (*where, key), rng.choice([1.0, "x", [1, 2], True]))
-    return mutant("unknown_key", base, data, accepted_fields((*where, key)), values_only=False,
-                  note=dotted((*where, key)))
+    return mutant(
+        "unknown_key", base, data, accepted_fields((*where, key)), values_only=False, note=dotted((*where, key))
+    )
 
 
 def _tables(data: dict, prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
@@ -211,22 +232,23 @@ def typo(rng: random.Random, word: str) -> str:
     i = rng.randrange(len(word))
     how = rng.choice(["drop", "double", "swap", "replace", "case"] if len(word) > 1 else ["double", "replace"])
     if how == "drop":
-        return word[:i] + word[i + 1:]
+        return word[:i] + word[i + 1 :]
     if how == "double":
         return word[:i] + word[i] + word[i:]
     if how == "swap":
         i = min(i, len(word) - 2)
-        return word[:i] + word[i + 1] + word[i] + word[i + 2:]
+        return word[:i] + word[i + 1] + word[i] + word[i + 2 :]
     if how == "case":
-        return word[:i] + word[i].swapcase() + word[i + 1:]
-    return word[:i] + rng.choice(string.ascii_lowercase.replace(word[i], "")) + word[i + 1:]
+        return word[:i] + word[i].swapcase() + word[i + 1 :]
+    return word[:i] + rng.choice(string.ascii_lowercase.replace(word[i], "")) + word[i + 1 :]
 
 
 def misspelt_key(rng: random.Random, base: Base) -> Mutant:
     """An existing key (or section name) misspelt: a letter dropped, doubled, swapped, replaced or recased."""
     data = copy.deepcopy(base.data)
-    candidates = [p for p in leaves(data) + _tables(data) if p[:1] not in (("set",), ("grid",), ("random",))
-                  or len(p) == 1]
+    candidates = [
+        p for p in leaves(data) + _tables(data) if p[:1] not in (("set",), ("grid",), ("random",)) or len(p) == 1
+    ]
     path = rng.choice(candidates)
     parent = get(data, path[:-1]) if len(path) > 1 else data
     new = typo(rng, path[-1])
@@ -234,7 +256,7 @@ def misspelt_key(rng: random.Random, base: Base) -> Mutant:
         new = path[-1] + "x"
     parent[new] = parent.pop(path[-1])
     fields = accepted_fields((*path[:-1], new)) + (f"{dotted(path)}: is required",)  # a required key, misspelt
-    if path == ("trajectory",) or len(path) == 1 and path[0] in ("name", "scenario", "seeds"):  # a required key
+    if path == ("trajectory",) or (len(path) == 1 and path[0] in ("name", "scenario", "seeds")):  # a required key
         fields += accepted_fields(path)
     if path[-1] == "kind":  # the kind is missing now
         fields += (dotted((*path[:-1], "kind")),)
@@ -248,8 +270,14 @@ def missing_section(rng: random.Random, base: Base) -> Mutant:
     data = copy.deepcopy(base.data)
     key = rng.choice(list(data))
     del data[key]
-    return mutant("missing_section", base, data, (key, "grid") if key in ("grid", "random") else (key,),
-                  values_only=False, note=key)
+    return mutant(
+        "missing_section",
+        base,
+        data,
+        (key, "grid") if key in ("grid", "random") else (key,),
+        values_only=False,
+        note=key,
+    )
 
 
 def nan_inf(rng: random.Random, base: Base) -> Mutant:
@@ -261,12 +289,29 @@ def nan_inf(rng: random.Random, base: Base) -> Mutant:
     return mutant("nan_inf", base, data, accepted_fields(path), note=f"{dotted(path)} = {value}")
 
 
-POSITIVE = [("robot", "mass"), ("robot", "inertia"), ("robot", "wheel_radius"), ("robot", "half_axle"),
-            ("robot", "max_torque"), ("plant", "mass"), ("plant", "inertia"), ("plant", "wheel_radius"),
-            ("simulation", "duration"), ("simulation", "control_period"), ("simulation", "substeps"),
-            ("trajectory", "speed"), ("controller", "max_velocity")]
-BY_TRAJECTORY = {"circle": "radius", "square": "side", "figure_eight": "size", "line": "speed",
-                 "waypoints": "speed", "sinusoid": "wavelength"}
+POSITIVE = [
+    ("robot", "mass"),
+    ("robot", "inertia"),
+    ("robot", "wheel_radius"),
+    ("robot", "half_axle"),
+    ("robot", "max_torque"),
+    ("plant", "mass"),
+    ("plant", "inertia"),
+    ("plant", "wheel_radius"),
+    ("simulation", "duration"),
+    ("simulation", "control_period"),
+    ("simulation", "substeps"),
+    ("trajectory", "speed"),
+    ("controller", "max_velocity"),
+]
+BY_TRAJECTORY = {
+    "circle": "radius",
+    "square": "side",
+    "figure_eight": "size",
+    "line": "speed",
+    "waypoints": "speed",
+    "sinusoid": "wavelength",
+}
 SWEEP_POSITIVE = [("seeds",), ("chunk",), ("seeds", "count"), ("random", "n")]
 
 
@@ -291,9 +336,19 @@ def window_outside(rng: random.Random, base: Base) -> Mutant:
     data = copy.deepcopy(base.data)
     section = data.setdefault("set", {}) if "scenario" in data else data.setdefault("simulation", {})
     duration = section.get("duration", section.get("simulation.duration", 40.0))
-    value = rng.choice([[-1.0, duration], [0.0, duration + rng.uniform(0.01, 100.0)], [duration, duration],
-                        [duration / 2, duration / 4], [duration + 1, duration + 2], [0.0], [], [0.0, 1.0, 2.0],
-                        [-1e308, 1e308]])
+    value = rng.choice(
+        [
+            [-1.0, duration],
+            [0.0, duration + rng.uniform(0.01, 100.0)],
+            [duration, duration],
+            [duration / 2, duration / 4],
+            [duration + 1, duration + 2],
+            [0.0],
+            [],
+            [0.0, 1.0, 2.0],
+            [-1e308, 1e308],
+        ]
+    )
     if "scenario" in data:
         section["simulation.metric_window"] = value
         fields = ("simulation.metric_window",)
@@ -303,8 +358,13 @@ def window_outside(rng: random.Random, base: Base) -> Mutant:
     return mutant("window_outside", base, data, fields, note=str(value))
 
 
-GAINED = ["backstepping", "nn_adaptive_backstepping", "sliding_mode_backstepping", "kinematic_backstepping",
-          "adaptive_backstepping"]
+GAINED = [
+    "backstepping",
+    "nn_adaptive_backstepping",
+    "sliding_mode_backstepping",
+    "kinematic_backstepping",
+    "adaptive_backstepping",
+]
 
 
 def gains_out_of_range(rng: random.Random, base: Base) -> Mutant:
@@ -319,8 +379,9 @@ def gains_out_of_range(rng: random.Random, base: Base) -> Mutant:
     controller = data.setdefault("controller", {})
     choice = rng.randrange(5)
     if choice == 0:
-        value = rng.choice([[0.0, 55.0, 15.0], [1.0, -55.0, 15.0], [1.0, 55.0], [1.0, 55.0, 15.0, 1.0],
-                            [1.0, 55.0, -1e-300]])
+        value = rng.choice(
+            [[0.0, 55.0, 15.0], [1.0, -55.0, 15.0], [1.0, 55.0], [1.0, 55.0, 15.0, 1.0], [1.0, 55.0, -1e-300]]
+        )
         controller["gains"] = value
         fields: tuple[str, ...] = ("controller.gains",)
     elif choice == 1:  # outside the NN-adaptive bounds
@@ -330,8 +391,9 @@ def gains_out_of_range(rng: random.Random, base: Base) -> Mutant:
         controller["gains"] = value
         fields = ("controller.gains",)
     elif choice == 2:
-        key, value = rng.choice([("kc", [0.0, 10.0]), ("kc", [10.0, -1.0]), ("max_yaw_rate", -4.0),
-                                 ("max_velocity", 0.0)])
+        key, value = rng.choice(
+            [("kc", [0.0, 10.0]), ("kc", [10.0, -1.0]), ("max_yaw_rate", -4.0), ("max_velocity", 0.0)]
+        )
         controller[key] = value
         fields = (f"controller.{key}",)
     elif choice == 3:
@@ -339,8 +401,7 @@ def gains_out_of_range(rng: random.Random, base: Base) -> Mutant:
         data.setdefault("simulation", {})[key] = value
         fields = (f"simulation.{key}",)
     else:
-        key, value = rng.choice([("com_offset", 1.5), ("com_offset", -2.0), ("wheel_radius", 3.0),
-                                 ("half_axle", 6.0)])
+        key, value = rng.choice([("com_offset", 1.5), ("com_offset", -2.0), ("wheel_radius", 3.0), ("half_axle", 6.0)])
         data.setdefault(rng.choice(["robot", "plant"]), {})[key] = value
         fields = (f"robot.{key}", f"plant.{key}")
     return mutant("gains_out_of_range", base, data, fields, note=str(value))
@@ -353,8 +414,16 @@ def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
     if "scenario" in data:  # a sweep: its scenario file is missing, a folder, or not a scenario
         how = rng.choice(["missing", "folder", "csv"])
         data["scenario"] = {"missing": "nope.toml", "folder": "sub", "csv": "points.csv"}[how]
-        return mutant("bad_waypoints", base, data, ("scenario", "nope.toml", "sub", "points.csv"), values_only=False,
-                      note=how, extra={"points.csv": b"x,y\n0,0\n1,1\n"}, folders=("sub",))
+        return mutant(
+            "bad_waypoints",
+            base,
+            data,
+            ("scenario", "nope.toml", "sub", "points.csv"),
+            values_only=False,
+            note=how,
+            extra={"points.csv": b"x,y\n0,0\n1,1\n"},
+            folders=("sub",),
+        )
     old = data.get("trajectory", {})
     trajectory: dict[str, Any] = {"kind": "waypoints", "speed": old.get("speed", 0.5)}
     if rng.random() < 0.3:
@@ -363,16 +432,40 @@ def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
     folders: tuple[str, ...] = ()
     how = rng.choice(["inline", "file"])
     if how == "inline":
-        points = rng.choice([[], [[0.0, 0.0]], [[0.0, 0.0], [0.0, 0.0]], [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]],
-                             [[0.0, 0.0], [1.0, 1.0], [1.0, 1.0], [2.0, 0.0]], [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
-                             [[0.0], [1.0]], [[0.0, 0.0], [math.nan, 1.0]], [[0.0, 0.0], ["a", 1.0]]])
+        points = rng.choice(
+            [
+                [],
+                [[0.0, 0.0]],
+                [[0.0, 0.0], [0.0, 0.0]],
+                [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]],
+                [[0.0, 0.0], [1.0, 1.0], [1.0, 1.0], [2.0, 0.0]],
+                [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
+                [[0.0], [1.0]],
+                [[0.0, 0.0], [math.nan, 1.0]],
+                [[0.0, 0.0], ["a", 1.0]],
+            ]
+        )
         trajectory["points"] = points
         note = f"points = {points}"
     else:
-        content = rng.choice([b"", b"x,y\n", b"x,y\n3,4\n", b"1,1\n1,1\n1,1\n", b"0,0\n5,5\n5,5\n9,0\n",
-                              b"0,0,0\n1,1,1\n", b"0;0\n1;1\n", b"0,0\n1,zz\n", b"\xff\xfe0,0\n1,1\n",
-                              b"0,0\n\xc3\x28,1\n", b"name = 'x'\n[robot]\nmass = 1\n", b"0,0\nnan,1\n",
-                              b"0,0\ninf,1\n", b"\x00\x01\x02\x03"])
+        content = rng.choice(
+            [
+                b"",
+                b"x,y\n",
+                b"x,y\n3,4\n",
+                b"1,1\n1,1\n1,1\n",
+                b"0,0\n5,5\n5,5\n9,0\n",
+                b"0,0,0\n1,1,1\n",
+                b"0;0\n1;1\n",
+                b"0,0\n1,zz\n",
+                b"\xff\xfe0,0\n1,1\n",
+                b"0,0\n\xc3\x28,1\n",
+                b"name = 'x'\n[robot]\nmass = 1\n",
+                b"0,0\nnan,1\n",
+                b"0,0\ninf,1\n",
+                b"\x00\x01\x02\x03",
+            ]
+        )
         target = rng.choice(["points.csv", "points.csv", "points.csv", "missing", "folder", "/dev/null"])
         if target == "points.csv":
             extra["points.csv"] = content
@@ -383,12 +476,29 @@ def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
         trajectory["file"] = target
         note = f"file = {target} {content[:20]!r}"
     data["trajectory"] = trajectory
-    return mutant("bad_waypoints", base, data, ("trajectory.points", "trajectory.file", "trajectory.corner_radius"),
-                  values_only=False, note=note, extra=extra, folders=folders)
+    return mutant(
+        "bad_waypoints",
+        base,
+        data,
+        ("trajectory.points", "trajectory.file", "trajectory.corner_radius"),
+        values_only=False,
+        note=note,
+        extra=extra,
+        folders=folders,
+    )
 
 
-INVALID_UTF8 = [b"\xff", b"\xfe\xff", b"\xc3\x28", b"\xa0\xa1", b"\xe2\x28\xa1", b"\xed\xa0\x80", b"\xf8\x88\x80\x80\x80",
-                b"\xc0\xaf", b"\x80"]
+INVALID_UTF8 = [
+    b"\xff",
+    b"\xfe\xff",
+    b"\xc3\x28",
+    b"\xa0\xa1",
+    b"\xe2\x28\xa1",
+    b"\xed\xa0\x80",
+    b"\xf8\x88\x80\x80\x80",
+    b"\xc0\xaf",
+    b"\x80",
+]
 
 
 def invalid_utf8(rng: random.Random, base: Base) -> Mutant:
@@ -454,8 +564,14 @@ def bad_design(rng: random.Random, base: Base) -> Mutant:
             data["grid"]["robot.mass"] = []
             fields = ("grid.robot.mass",)
         else:
-            data["random"]["plant.mass"] = rng.choice([{"low": 14.0, "high": 8.0}, {"low": 1.0, "high": 1.0},
-                                                       {"low": 1.0}, {"low": 1.0, "high": 2.0, "mid": 1.5}])
+            data["random"]["plant.mass"] = rng.choice(
+                [
+                    {"low": 14.0, "high": 8.0},
+                    {"low": 1.0, "high": 1.0},
+                    {"low": 1.0},
+                    {"low": 1.0, "high": 2.0, "mid": 1.5},
+                ]
+            )
             fields = ("random.plant.mass", "plant.mass")
     elif how == 3:
         data["grid"] = {"robot.mass": [1.0]}
@@ -471,7 +587,9 @@ def bad_design(rng: random.Random, base: Base) -> Mutant:
         fields = (key, key.split(".")[0], f"grid.{key}", f"random.{key}")
     elif how == 5:
         data["set"] = {rng.choice(["robot.mas", "nope.x", "controller.gains"]): rng.choice(["a", [1.0], -1.0])}
-        fields = tuple(data["set"]) + tuple(f"set.{k}" for k in data["set"]) + tuple(k.split(".")[0] for k in data["set"])
+        fields = (
+            tuple(data["set"]) + tuple(f"set.{k}" for k in data["set"]) + tuple(k.split(".")[0] for k in data["set"])
+        )
     else:
         data.pop("grid", None)
         data.pop("random", None)
@@ -480,24 +598,98 @@ def bad_design(rng: random.Random, base: Base) -> Mutant:
 
 
 KINDS: dict[str, Callable[[random.Random, Base], Mutant]] = {
-    f.__name__: f for f in (wrong_type, unknown_key, misspelt_key, missing_section, nan_inf, nonpositive,
-                            window_outside, gains_out_of_range, bad_waypoints, invalid_utf8, toml_syntax, huge,
-                            bad_design)
+    f.__name__: f
+    for f in (
+        wrong_type,
+        unknown_key,
+        misspelt_key,
+        missing_section,
+        nan_inf,
+        nonpositive,
+        window_outside,
+        gains_out_of_range,
+        bad_waypoints,
+        invalid_utf8,
+        toml_syntax,
+        huge,
+        bad_design,
+    )
 }
 
 
 # --- --set overrides ---------------------------------------------------------------------------------
 
-BAD_PATHS = ["robot.nope", "nope.mass", "robot.mass.x", "robot..mass", ".mass", "robot.", "robot", "name.x",
-             "controller.gains.x", "simulation.seed.x", "trajectory.kind.x", "robot.Mass", "Robot.mass", "plant.mas",
-             "randomize.mass.relativ", "trajectory.radiuss", " robot . mass ", "robot.mass\x00"]
-BAD_VALUES = ["nan", "inf", "-inf", "1e999", "-1e999", "[1,", "'abc", '"', "{a=1}", "[]", "[1,2,3]", "true", "''",
-              "", "abc", "1e308", "-1e308", str(2**64), str(-(2**64)), "0", "-1", "0x10", "1_000", "[nan,1,1]",
-              "[[1,2]]", "{}", "1979-05-27", "\xff", "\u202e1"]
-SET_TARGETS = ["robot.mass", "robot.inertia", "robot.wheel_radius", "simulation.duration", "simulation.control_period",
-               "simulation.metric_window", "simulation.seed", "simulation.substeps", "controller.gains",
-               "controller.kind", "controller.inner", "trajectory.kind", "trajectory.speed", "initial.pose",
-               "disturbance.kind", "noise.position_std", "plant.com_offset", "name"]
+BAD_PATHS = [
+    "robot.nope",
+    "nope.mass",
+    "robot.mass.x",
+    "robot..mass",
+    ".mass",
+    "robot.",
+    "robot",
+    "name.x",
+    "controller.gains.x",
+    "simulation.seed.x",
+    "trajectory.kind.x",
+    "robot.Mass",
+    "Robot.mass",
+    "plant.mas",
+    "randomize.mass.relativ",
+    "trajectory.radiuss",
+    " robot . mass ",
+    "robot.mass\x00",
+]
+BAD_VALUES = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e999",
+    "-1e999",
+    "[1,",
+    "'abc",
+    '"',
+    "{a=1}",
+    "[]",
+    "[1,2,3]",
+    "true",
+    "''",
+    "",
+    "abc",
+    "1e308",
+    "-1e308",
+    str(2**64),
+    str(-(2**64)),
+    "0",
+    "-1",
+    "0x10",
+    "1_000",
+    "[nan,1,1]",
+    "[[1,2]]",
+    "{}",
+    "1979-05-27",
+    "\xff",
+    "\u202e1",
+]
+SET_TARGETS = [
+    "robot.mass",
+    "robot.inertia",
+    "robot.wheel_radius",
+    "simulation.duration",
+    "simulation.control_period",
+    "simulation.metric_window",
+    "simulation.seed",
+    "simulation.substeps",
+    "controller.gains",
+    "controller.kind",
+    "controller.inner",
+    "trajectory.kind",
+    "trajectory.speed",
+    "initial.pose",
+    "disturbance.kind",
+    "noise.position_std",
+    "plant.com_offset",
+    "name",
+]
 
 
 def set_override(rng: random.Random, base: Base) -> Mutant:
@@ -508,8 +700,9 @@ def set_override(rng: random.Random, base: Base) -> Mutant:
         path = rng.choice(BAD_PATHS)
         override = f"{path}={rng.choice(['1', '1.0', '[1,2]', 'x'])}"
         parts = [p.strip() for p in path.split(".")]
-        fields = ["--set", dotted(tuple(p for p in parts if p)), parts[0]] + [dotted(tuple(parts[:i])) for i in
-                                                                          range(1, len(parts) + 1)]
+        fields = ["--set", dotted(tuple(p for p in parts if p)), parts[0]] + [
+            dotted(tuple(parts[:i])) for i in range(1, len(parts) + 1)
+        ]
         fields = [f for f in fields if f]
     elif how == 1:
         target = rng.choice(SET_TARGETS)
@@ -555,7 +748,7 @@ def call(args: list[str]) -> tuple[Any, str, str]:
             code: Any = main(args)
         except ClusterStarted:
             code = "cluster"
-        except BaseException as exc:  # noqa: BLE001  (an escaped exception is what the fuzzer looks for)
+        except BaseException as exc:
             code = exc
     return code, out.getvalue(), err.getvalue()
 
@@ -572,8 +765,7 @@ def refusal_problem(code: Any, out: str, err: str, fields: tuple[str, ...], fold
         return f"stdout not empty: {out[:80]!r}"
     if not 1 <= len(lines) <= 2 or not all(line.strip() for line in lines):
         return f"stderr is not one or two lines: {err[:200]!r}"
-    if not any(f in lines[0] for f in fields) and not (ANY_FIELD in fields and re.match(r"error: \S+: ",
-                                                                                         lines[0])):
+    if not any(f in lines[0] for f in fields) and not (ANY_FIELD in fields and re.match(r"error: \S+: ", lines[0])):
         return f"message does not name {fields}: {lines[0][:200]!r}"
     if folder.exists():
         return "output folder written"
@@ -615,8 +807,11 @@ def judge(m: Mutant, folder: Path, *, sweep: bool = False, run: bool = False) ->
     if code == 0 and not err and out.startswith("ok: "):
         if not run:
             return "ran", "validated"
-        short = [a for o in SHORT for a in ("--set", o)] if m.values_only and not any(
-            "simulation" in o for o in m.overrides) and "simulation" not in m.note else []
+        short = (
+            [a for o in SHORT for a in ("--set", o)]
+            if m.values_only and not any("simulation" in o for o in m.overrides) and "simulation" not in m.note
+            else []
+        )
         code, out, err = call(["run", str(path), *overrides, *short, "--out", str(out_dir)])
         if code in (0, 1) and "Traceback" not in err:
             return "ran", f"run exit {code}"
@@ -634,7 +829,7 @@ def judge(m: Mutant, folder: Path, *, sweep: bool = False, run: bool = False) ->
     return "refused", err.splitlines()[0]
 
 
-SCENARIO_KINDS = [k for k in KINDS] + ["set_override"]
+SCENARIO_KINDS = [*KINDS, "set_override"]
 SWEEP_KINDS = [k for k in KINDS if k != "set_override"]
 
 

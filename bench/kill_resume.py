@@ -20,6 +20,7 @@ The sweep: figure_eight (Gaussian disturbance and noise, so every seed differs) 
 
 Prints kills survived, records lost, duplicated, differing; exit code 0 when all are zero.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,9 +45,11 @@ PYTHON = sys.executable
 def sweep_file(folder: Path, *, masses: int, seeds: int, chunk: int, duration: float) -> Path:
     grid = [round(8.0 + 4.0 * i / max(masses - 1, 1), 6) for i in range(masses)]
     path = folder / "sweep.toml"
-    path.write_text(f'scenario = "{ROOT / "scenarios" / "figure_eight.toml"}"\ncontrollers = ["backstepping"]\n'
-                    f'seeds = {seeds}\nchunk = {chunk}\n[set]\n"simulation.duration" = {duration!r}\n'
-                    f'"simulation.metric_window" = [0.0, {duration!r}]\n[grid]\n"robot.mass" = {grid}\n')
+    path.write_text(
+        f'scenario = "{ROOT / "scenarios" / "figure_eight.toml"}"\ncontrollers = ["backstepping"]\n'
+        f'seeds = {seeds}\nchunk = {chunk}\n[set]\n"simulation.duration" = {duration!r}\n'
+        f'"simulation.metric_window" = [0.0, {duration!r}]\n[grid]\n"robot.mass" = {grid}\n'
+    )
     return path
 
 
@@ -84,9 +87,14 @@ def compare(reference: Path, out: Path) -> dict:
     leftovers += [p.name for p in out.iterdir() if p.name.startswith(".")]
     result = pq.read_table(out / "results.parquet")
     keys = result.column("key").to_pylist()
-    return {"lost": len(set(want) - set(got)), "extra": len(set(got) - set(want)),
-            "duplicated": len(keys) - len(set(keys)), "differing": sum(want[k] != got[k] for k in set(want) & set(got)),
-            "leftovers": sorted(leftovers), "tables_equal": result.equals(pq.read_table(reference / "results.parquet"))}
+    return {
+        "lost": len(set(want) - set(got)),
+        "extra": len(set(got) - set(want)),
+        "duplicated": len(keys) - len(set(keys)),
+        "differing": sum(want[k] != got[k] for k in set(want) & set(got)),
+        "leftovers": sorted(leftovers),
+        "tables_equal": result.equals(pq.read_table(reference / "results.parquet")),
+    }
 
 
 def timed(path: Path, out: Path) -> tuple[float, float, float]:
@@ -160,28 +168,49 @@ def main() -> int:
             totals["tables_equal"] &= found["tables_equal"]
         killed_wall = time.perf_counter() - start
 
-    figures = {"runs": total, "tasks": args.masses * -(-args.seeds // args.chunk), "seed": args.seed,
-               "uninterrupted_s": round(wall, 1), "first_record_s": round(first, 1), "last_record_s": round(last, 1),
-               "uninterrupted_twice_equal": again["differing"] == again["lost"] == 0 and again["tables_equal"],
-               "kills": kills, "starts": starts, "cycles": len(cycles), "orphan_workers": orphans,
-               "kills_with_records_partly_written": sum(0 < n < total for c in cycles
-                                                        for n in c["records_at_each_kill"]),
-               "killed_and_resumed_s": round(killed_wall, 1)} | totals | {"per_cycle": cycles}
+    figures = (
+        {
+            "runs": total,
+            "tasks": args.masses * -(-args.seeds // args.chunk),
+            "seed": args.seed,
+            "uninterrupted_s": round(wall, 1),
+            "first_record_s": round(first, 1),
+            "last_record_s": round(last, 1),
+            "uninterrupted_twice_equal": again["differing"] == again["lost"] == 0 and again["tables_equal"],
+            "kills": kills,
+            "starts": starts,
+            "cycles": len(cycles),
+            "orphan_workers": orphans,
+            "kills_with_records_partly_written": sum(0 < n < total for c in cycles for n in c["records_at_each_kill"]),
+            "killed_and_resumed_s": round(killed_wall, 1),
+        }
+        | totals
+        | {"per_cycle": cycles}
+    )
     if args.json:
         print(json.dumps(figures, indent=2))
     else:
-        print(f"{total} runs in {figures['tasks']} tasks; uninterrupted {figures['uninterrupted_s']} s "
-              f"(records from {first:.1f} s to {last:.1f} s); killed and resumed: {killed_wall:.0f} s")
-        print(f"kills survived: {kills} in {len(cycles)} cycles, {starts} starts "
-              f"({figures['kills_with_records_partly_written']} with the store part-written); "
-              f"orphan workers: {orphans}")
+        print(
+            f"{total} runs in {figures['tasks']} tasks; uninterrupted {figures['uninterrupted_s']} s "
+            f"(records from {first:.1f} s to {last:.1f} s); killed and resumed: {killed_wall:.0f} s"
+        )
+        print(
+            f"kills survived: {kills} in {len(cycles)} cycles, {starts} starts "
+            f"({figures['kills_with_records_partly_written']} with the store part-written); "
+            f"orphan workers: {orphans}"
+        )
         for i, cycle in enumerate(cycles):
             print(f"  cycle {i}: records at each kill {cycle['records_at_each_kill']}")
-        print(f"records lost: {totals['lost']}, extra: {totals['extra']}, duplicated: {totals['duplicated']}, "
-              f"differing: {totals['differing']}; leftover files: {totals['leftovers'] or 'none'}; "
-              f"results tables equal: {totals['tables_equal']}")
-    ok = (totals["lost"] == totals["extra"] == totals["duplicated"] == totals["differing"] == orphans == 0
-          and not totals["leftovers"] and totals["tables_equal"])
+        print(
+            f"records lost: {totals['lost']}, extra: {totals['extra']}, duplicated: {totals['duplicated']}, "
+            f"differing: {totals['differing']}; leftover files: {totals['leftovers'] or 'none'}; "
+            f"results tables equal: {totals['tables_equal']}"
+        )
+    ok = (
+        totals["lost"] == totals["extra"] == totals["duplicated"] == totals["differing"] == orphans == 0
+        and not totals["leftovers"]
+        and totals["tables_equal"]
+    )
     return 0 if ok else 1
 
 

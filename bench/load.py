@@ -17,6 +17,7 @@ mark, so a peak between samples is not missed while the process lives), and the 
 sample; ``getrusage(RUSAGE_CHILDREN).ru_maxrss`` after the wait cross-checks the largest single process.
 Then the output is checked: the number of rows, no duplicate key, every run ``ok``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -63,8 +64,11 @@ def measured(command: list[str]) -> dict:
         for member in family:
             try:
                 total += member.memory_info().rss
-                kind = "driver" if member.pid == proc.pid else (
-                    "worker" if any("spawn_main" in part for part in member.cmdline()) else "other")
+                kind = (
+                    "driver"
+                    if member.pid == proc.pid
+                    else ("worker" if any("spawn_main" in part for part in member.cmdline()) else "other")
+                )
             except psutil.NoSuchProcess:
                 continue
             peaks[member.pid] = (kind, max(peaks.get(member.pid, ("", 0))[1], hwm(member.pid)))
@@ -77,39 +81,66 @@ def measured(command: list[str]) -> dict:
     by_kind: dict[str, list[int]] = {}
     for kind, peak in peaks.values():
         by_kind.setdefault(kind, []).append(peak)
-    return {"wall_s": round(wall, 1), "stdout": stdout.strip().splitlines(),
-            "driver_peak_mib": round(max(by_kind.get("driver", [0])) / MIB),
-            "worker_peak_mib": [round(p / MIB) for p in sorted(by_kind.get("worker", []))],
-            "tree_peak_rss_mib": round(tree_peak / MIB),
-            "largest_child_maxrss_mib": round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)}
+    return {
+        "wall_s": round(wall, 1),
+        "stdout": stdout.strip().splitlines(),
+        "driver_peak_mib": round(max(by_kind.get("driver", [0])) / MIB),
+        "worker_peak_mib": [round(p / MIB) for p in sorted(by_kind.get("worker", []))],
+        "tree_peak_rss_mib": round(tree_peak / MIB),
+        "largest_child_maxrss_mib": round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024),
+    }
 
 
 def load_sweep(folder: Path, *, configs: int, seeds: int, chunk: int) -> dict:
     masses = [round(8.0 + 4.0 * i / max(configs - 1, 1), 6) for i in range(configs)]
     path = folder / "sweep.toml"
-    path.write_text(f'scenario = "{ROOT / "scenarios" / "paper_line.toml"}"\ncontrollers = ["backstepping"]\n'
-                    f'seeds = {seeds}\nchunk = {chunk}\n[set]\n"simulation.duration" = 2.0\n'
-                    f'"simulation.metric_window" = [0.0, 2.0]\n[grid]\n"robot.mass" = {masses}\n')
+    path.write_text(
+        f'scenario = "{ROOT / "scenarios" / "paper_line.toml"}"\ncontrollers = ["backstepping"]\n'
+        f'seeds = {seeds}\nchunk = {chunk}\n[set]\n"simulation.duration" = 2.0\n'
+        f'"simulation.metric_window" = [0.0, 2.0]\n[grid]\n"robot.mass" = {masses}\n'
+    )
     out = folder / "sweep"
     figures = measured([*DDTRACK, "sweep", str(path), "--out", str(out), "--workers", "2"])
     keys = pq.read_table(out / "results.parquet", columns=["key", "status"])
-    figures |= {"runs": configs * seeds, "tasks": configs * -(-seeds // chunk), "rows": keys.num_rows,
-                "distinct_keys": len(set(keys.column("key").to_pylist())),
-                "records": sum(1 for _ in (out / "records").glob("*.json")),
-                "ok": keys.column("status").to_pylist().count("ok")}
+    figures |= {
+        "runs": configs * seeds,
+        "tasks": configs * -(-seeds // chunk),
+        "rows": keys.num_rows,
+        "distinct_keys": len(set(keys.column("key").to_pylist())),
+        "records": sum(1 for _ in (out / "records").glob("*.json")),
+        "ok": keys.column("status").to_pylist().count("ok"),
+    }
     return figures
 
 
 def load_mc(folder: Path, *, n: int, chunk: int) -> dict:
     out = folder / "mc"
-    figures = measured([*DDTRACK, "mc", str(ROOT / "scenarios" / "paper_line.toml"), "-n", str(n),
-                        "--controllers", "backstepping", "--chunk", str(chunk), "--out", str(out)])
+    figures = measured(
+        [
+            *DDTRACK,
+            "mc",
+            str(ROOT / "scenarios" / "paper_line.toml"),
+            "-n",
+            str(n),
+            "--controllers",
+            "backstepping",
+            "--chunk",
+            str(chunk),
+            "--out",
+            str(out),
+        ]
+    )
     runs = pq.read_table(out / "runs.parquet", columns=["seed", "status"])
     seeds = runs.column("seed").to_pylist()
-    figures |= {"runs": n, "chunk": chunk, "rows": runs.num_rows, "distinct_seeds": len(set(seeds)),
-                "ok": runs.column("status").to_pylist().count("ok"),
-                "robot_steps_per_s": round(n * 4000 / figures["wall_s"]),
-                "all_series_would_take_gib": round(n * 4000 * 20 * 8 / 2**30, 1)}
+    figures |= {
+        "runs": n,
+        "chunk": chunk,
+        "rows": runs.num_rows,
+        "distinct_seeds": len(set(seeds)),
+        "ok": runs.column("status").to_pylist().count("ok"),
+        "robot_steps_per_s": round(n * 4000 / figures["wall_s"]),
+        "all_series_would_take_gib": round(n * 4000 * 20 * 8 / 2**30, 1),
+    }
     return figures
 
 
@@ -134,17 +165,25 @@ def main() -> int:
         return 0
     if "sweep" in figures:
         f = figures["sweep"]
-        print(f"sweep: {f['runs']} runs of 2 s in {f['tasks']} tasks, 2 workers: {f['wall_s']} s; "
-              f"{f['rows']} rows, {f['distinct_keys']} distinct keys, {f['records']} records, {f['ok']} ok")
-        print(f"  peak memory: driver {f['driver_peak_mib']} MiB, workers {f['worker_peak_mib']} MiB, "
-              f"whole tree {f['tree_peak_rss_mib']} MiB")
+        print(
+            f"sweep: {f['runs']} runs of 2 s in {f['tasks']} tasks, 2 workers: {f['wall_s']} s; "
+            f"{f['rows']} rows, {f['distinct_keys']} distinct keys, {f['records']} records, {f['ok']} ok"
+        )
+        print(
+            f"  peak memory: driver {f['driver_peak_mib']} MiB, workers {f['worker_peak_mib']} MiB, "
+            f"whole tree {f['tree_peak_rss_mib']} MiB"
+        )
     if "mc" in figures:
         f = figures["mc"]
-        print(f"mc: {f['runs']} runs of 40 s (4000 periods) in chunks of {f['chunk']}: {f['wall_s']} s "
-              f"({f['robot_steps_per_s'] / 1e6:.2f} M robot-steps/s); {f['rows']} rows, {f['distinct_seeds']} seeds, "
-              f"{f['ok']} ok")
-        print(f"  peak memory: {f['driver_peak_mib']} MiB (every series held would take "
-              f"{f['all_series_would_take_gib']} GiB)")
+        print(
+            f"mc: {f['runs']} runs of 40 s (4000 periods) in chunks of {f['chunk']}: {f['wall_s']} s "
+            f"({f['robot_steps_per_s'] / 1e6:.2f} M robot-steps/s); {f['rows']} rows, {f['distinct_seeds']} seeds, "
+            f"{f['ok']} ok"
+        )
+        print(
+            f"  peak memory: {f['driver_peak_mib']} MiB (every series held would take "
+            f"{f['all_series_would_take_gib']} GiB)"
+        )
     return 0
 
 

@@ -10,6 +10,7 @@ On one CPU device, per robot control step of the paper's line case (10 RK4 subst
 * ``<op>_ns``: one float64 (and float32) elementwise transcendental on a batch, per element, in a ``fori_loop``,
   against a multiply-add: the plant needs a sine, a cosine and two tanh per evaluation.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,8 +55,12 @@ def profile(size: int) -> dict:
         torque, disturbance = jnp.array([0.5, 0.5]), jnp.zeros(2)
 
         def period(x, _):
-            return rk4(lambda z: plant.derivative(z, torque, disturbance), plant.hold(x, torque),
-                       sim.control_period, sim.substeps), None
+            return rk4(
+                lambda z: plant.derivative(z, torque, disturbance),
+                plant.hold(x, torque),
+                sim.control_period,
+                sim.substeps,
+            ), None
 
         return jax.lax.scan(period, x0, None, length=sim.n_steps, unroll=4)[0]
 

@@ -36,6 +36,7 @@ Usage::
     setup, _ = ddtrack.prepare(scenario)
     states = run_nn_adaptive(**params_from_nn_setup(scenario, setup))
 """
+
 from __future__ import annotations
 
 import argparse
@@ -105,12 +106,20 @@ def wrap_angle(angle: float) -> float:
 def line_reference(line: Line, t: float) -> tuple[float, float, float, float, float, float, float]:
     """Reference (x_r, y_r, theta_r, v_r, omega_r, v_r_dot, omega_r_dot) at time t (SPEC 2.1)."""
     dx, dy = line.speed * math.cos(line.heading), line.speed * math.sin(line.heading)
-    return (line.start[0] + t * dx, line.start[1] + t * dy, wrap_angle(math.atan2(dy, dx)),
-            math.hypot(dx, dy), 0.0, 0.0, 0.0)
+    return (
+        line.start[0] + t * dx,
+        line.start[1] + t * dy,
+        wrap_angle(math.atan2(dy, dx)),
+        math.hypot(dx, dy),
+        0.0,
+        0.0,
+        0.0,
+    )
 
 
-def posture_error(x: float, y: float, theta: float, x_r: float, y_r: float,
-                  theta_r: float) -> tuple[float, float, float]:
+def posture_error(
+    x: float, y: float, theta: float, x_r: float, y_r: float, theta_r: float
+) -> tuple[float, float, float]:
     """Kanayama e_p = T_e(theta) (q_r - q), e_theta wrapped (SPEC 2.2)."""
     c, s = math.cos(theta), math.sin(theta)
     dx, dy = x_r - x, y_r - y
@@ -139,10 +148,12 @@ def rk4(f: Callable[[State], State], state: State, duration: float, steps: int) 
     h = duration / steps
     for _ in range(steps):
         k1 = f(state)
-        k2 = f(tuple(s + 0.5 * h * k for s, k in zip(state, k1)))
-        k3 = f(tuple(s + 0.5 * h * k for s, k in zip(state, k2)))
-        k4 = f(tuple(s + h * k for s, k in zip(state, k3)))
-        state = tuple(s + (h / 6.0) * (a + 2.0 * b + 2.0 * c + d) for s, a, b, c, d in zip(state, k1, k2, k3, k4))
+        k2 = f(tuple(s + 0.5 * h * k for s, k in zip(state, k1, strict=True)))
+        k3 = f(tuple(s + 0.5 * h * k for s, k in zip(state, k2, strict=True)))
+        k4 = f(tuple(s + h * k for s, k in zip(state, k3, strict=True)))
+        state = tuple(
+            s + (h / 6.0) * (a + 2.0 * b + 2.0 * c + d) for s, a, b, c, d in zip(state, k1, k2, k3, k4, strict=True)
+        )
     return state
 
 
@@ -163,8 +174,9 @@ class BacksteppingGains:
     max_yaw_rate: float  # |omega_c| clamp [rad/s]
 
 
-def kanayama(error: tuple[float, float, float], v: float, omega: float, ref: tuple, kx: float, ky: float,
-             ktheta: float) -> tuple[float, float, float, float]:
+def kanayama(
+    error: tuple[float, float, float], v: float, omega: float, ref: tuple, kx: float, ky: float, ktheta: float
+) -> tuple[float, float, float, float]:
     """nu_c (SPEC 2.4) and its analytic derivative with the measured nu in the error dynamics (SPEC 2.5).
 
     Returns (v_c, omega_c, v_c_dot, omega_c_dot), unclamped.
@@ -182,8 +194,9 @@ def kanayama(error: tuple[float, float, float], v: float, omega: float, ref: tup
     return v_c, omega_c, v_c_dot, omega_c_dot
 
 
-def clamp_command(v_c: float, omega_c: float, v_c_dot: float, omega_c_dot: float, max_velocity: float,
-                  max_yaw_rate: float) -> tuple[float, float, float, float, bool]:
+def clamp_command(
+    v_c: float, omega_c: float, v_c_dot: float, omega_c_dot: float, max_velocity: float, max_yaw_rate: float
+) -> tuple[float, float, float, float, bool]:
     """|v_c| <= v_max, |omega_c| <= w_max; a clamped channel's derivative is 0 (SPEC 2.5). Last: any clamped."""
     saturated = False
     if abs(v_c) > max_velocity:
@@ -193,15 +206,31 @@ def clamp_command(v_c: float, omega_c: float, v_c_dot: float, omega_c_dot: float
     return v_c, omega_c, v_c_dot, omega_c_dot, saturated
 
 
-def computed_torque(nominal: Robot, v: float, omega: float, v_c: float, omega_c: float, v_c_dot: float,
-                    omega_c_dot: float, kc: tuple[float, float]) -> tuple[float, float]:
+def computed_torque(
+    nominal: Robot,
+    v: float,
+    omega: float,
+    v_c: float,
+    omega_c: float,
+    v_c_dot: float,
+    omega_c_dot: float,
+    kc: tuple[float, float],
+) -> tuple[float, float]:
     """tau = B_bar^-1 (M_hat u + V_hat(nu) nu) + tau_f_hat, u = nu_c_dot + K_c (nu_c - nu), saturated (SPEC 2.5)."""
     tau_r, tau_l = unsaturated_torque(nominal, v, omega, v_c, omega_c, v_c_dot, omega_c_dot, kc)
     return clamp(tau_r, nominal.max_torque), clamp(tau_l, nominal.max_torque)
 
 
-def unsaturated_torque(nominal: Robot, v: float, omega: float, v_c: float, omega_c: float, v_c_dot: float,
-                       omega_c_dot: float, kc: tuple[float, float]) -> tuple[float, float]:
+def unsaturated_torque(
+    nominal: Robot,
+    v: float,
+    omega: float,
+    v_c: float,
+    omega_c: float,
+    v_c_dot: float,
+    omega_c_dot: float,
+    kc: tuple[float, float],
+) -> tuple[float, float]:
     """:func:`computed_torque` before the torque limit (eqs. 7, 11)."""
     u_v = v_c_dot + kc[0] * (v_c - v)
     u_omega = omega_c_dot + kc[1] * (omega_c - omega)
@@ -220,7 +249,8 @@ def backstepping_step(nominal: Robot, gains: BacksteppingGains) -> Callable:
     def step(t: float, y: State, ref: tuple, memory: Any) -> tuple[tuple[float, float], Any]:
         error = posture_error(y[0], y[1], y[2], ref[0], ref[1], ref[2])
         v_c, omega_c, v_c_dot, omega_c_dot, _ = clamp_command(
-            *kanayama(error, y[3], y[4], ref, gains.kx, gains.ky, gains.ktheta), gains.max_velocity, gains.max_yaw_rate)
+            *kanayama(error, y[3], y[4], ref, gains.kx, gains.ky, gains.ktheta), gains.max_velocity, gains.max_yaw_rate
+        )
         tau = computed_torque(nominal, y[3], y[4], v_c, omega_c, v_c_dot, omega_c_dot, gains.kc)
         return tau, memory
 
@@ -243,8 +273,12 @@ class Network:
         return Network([row[:] for row in self.w1], self.b1[:], [row[:] for row in self.w2], self.b2[:])
 
     def zeros(self) -> Network:
-        return Network([[0.0] * len(row) for row in self.w1], [0.0] * len(self.b1),
-                       [[0.0] * len(row) for row in self.w2], [0.0] * len(self.b2))
+        return Network(
+            [[0.0] * len(row) for row in self.w1],
+            [0.0] * len(self.b1),
+            [[0.0] * len(row) for row in self.w2],
+            [0.0] * len(self.b2),
+        )
 
 
 @dataclass(frozen=True)
@@ -295,24 +329,34 @@ def body_increment(pose: tuple, next_pose: tuple) -> tuple[float, float, float]:
 
 def hidden_layer(network: Network, z_normalised: list[float]) -> list[float]:
     """h = tanh(W1 z~ + b1) (paper eq. 19, N_h tanh units)."""
-    return [math.tanh(sum(w * z for w, z in zip(row, z_normalised)) + b) for row, b in zip(network.w1, network.b1)]
+    return [
+        math.tanh(sum(w * z for w, z in zip(row, z_normalised, strict=True)) + b)
+        for row, b in zip(network.w1, network.b1, strict=True)
+    ]
 
 
 def output_layer(network: Network, h: list[float]) -> list[float]:
     """y~ = W2 h + b2 (paper eq. 20 with the linear output of eq. 32)."""
-    return [sum(w * h_l for w, h_l in zip(row, h)) + b for row, b in zip(network.w2, network.b2)]
+    return [
+        sum(w * h_l for w, h_l in zip(row, h, strict=True)) + b for row, b in zip(network.w2, network.b2, strict=True)
+    ]
 
 
-def train_step(network: Network, velocity: Network, z_normalised: list[float], target: list[float],
-               options: AdaptiveOptions) -> None:
+def train_step(
+    network: Network, velocity: Network, z_normalised: list[float], target: list[float], options: AdaptiveOptions
+) -> None:
     """One backpropagation step on E = |y~ - y~*|^2 / 2, in place (SPEC 3.7): delta_2 = y~ - y~*,
     delta_1 = (W2^T delta_2) (1 - h^2), grad W2 = delta_2 h^T, grad W1 = delta_1 z~^T; the whole gradient
     scaled down to norm <= clip_norm; dW(k) = -eta grad + beta dW(k-1), W <- W + dW, for every array."""
     h = hidden_layer(network, z_normalised)
-    delta2 = [y - y_star for y, y_star in zip(output_layer(network, h), target)]
-    delta1 = [sum(network.w2[i][l] * d for i, d in enumerate(delta2)) * (1.0 - h_l * h_l) for l, h_l in enumerate(h)]
-    squares = (sum((d * z) ** 2 for d in delta1 for z in z_normalised) + sum(d * d for d in delta1)
-               + sum((d * h_l) ** 2 for d in delta2 for h_l in h) + sum(d * d for d in delta2))
+    delta2 = [y - y_star for y, y_star in zip(output_layer(network, h), target, strict=True)]
+    delta1 = [sum(network.w2[i][k] * d for i, d in enumerate(delta2)) * (1.0 - h_k * h_k) for k, h_k in enumerate(h)]
+    squares = (
+        sum((d * z) ** 2 for d in delta1 for z in z_normalised)
+        + sum(d * d for d in delta1)
+        + sum((d * h_l) ** 2 for d in delta2 for h_l in h)
+        + sum(d * d for d in delta2)
+    )
     rate = -options.learning_rate * min(1.0, options.clip_norm / max(math.sqrt(squares), 1e-300))
     beta = options.momentum
 
@@ -321,8 +365,8 @@ def train_step(network: Network, velocity: Network, z_normalised: list[float], t
             momenta[j] = rate * (delta * x) + beta * momenta[j]
             weights[j] += momenta[j]
 
-    for l, d in enumerate(delta1):
-        update(network.w1[l], velocity.w1[l], d, z_normalised)
+    for k, d in enumerate(delta1):
+        update(network.w1[k], velocity.w1[k], d, z_normalised)
     update(network.b1, velocity.b1, 1.0, delta1)
     for i, d in enumerate(delta2):
         update(network.w2[i], velocity.w2[i], d, h)
@@ -332,23 +376,31 @@ def train_step(network: Network, velocity: Network, z_normalised: list[float], t
 def emulator_jacobian(network: Network, options: AdaptiveOptions, z: list[float]) -> list[list[float]]:
     """J_b^n (3 x 2): the emulator's d y / d(v_c, omega_c) at z over c_bar (SPEC 3.4 (c)), with
     d y_i / d z_j = s_y,i sum_l W2_il (1 - h_l^2) W1_lj / s_z,j (paper eq. 34 corrected, SPEC 3.7)."""
-    h = hidden_layer(network, [z_j / s for z_j, s in zip(z, options.input_scales)])
+    h = hidden_layer(network, [z_j / s for z_j, s in zip(z, options.input_scales, strict=True)])
     slope = [1.0 - h_l * h_l for h_l in h]
-    return [[s_y * sum(w2_l * slope_l * w1_l[j] for w2_l, slope_l, w1_l in zip(row, slope, network.w1))
-             / options.input_scales[j] / options.jacobian_scale for j in (0, 1)]
-            for row, s_y in zip(network.w2, options.output_scales)]
+    return [
+        [
+            s_y
+            * sum(w2_l * slope_l * w1_l[j] for w2_l, slope_l, w1_l in zip(row, slope, network.w1, strict=True))
+            / options.input_scales[j]
+            / options.jacobian_scale
+            for j in (0, 1)
+        ]
+        for row, s_y in zip(network.w2, options.output_scales, strict=True)
+    ]
 
 
-def gain_gradient(error: tuple[float, float, float], v_r: float, gamma: tuple[float, float, float],
-                  jacobian: list[list[float]]) -> tuple[float, float, float]:
+def gain_gradient(
+    error: tuple[float, float, float], v_r: float, gamma: tuple[float, float, float], jacobian: list[list[float]]
+) -> tuple[float, float, float]:
     """dJ/d(Kx, Ky, Ktheta) = e^T Gamma D_b J_b^n Phi for J = e^T Gamma e / 2 (eqs. 22-24 corrected, SPEC 3.5
     generic form), with the exact D_b = [[-1, 0, e_y], [0, -1, -e_x], [0, 0, -1]] (SPEC 3.3) and
     Phi = [[e_x, 0, 0], [0, v_r e_y, v_r sin e_th]] (SPEC 3.2)."""
     e_x, e_y, e_th = error
     g_x, g_y, g_th = gamma[0] * e_x, gamma[1] * e_y, gamma[2] * e_th
     row = (-g_x, -g_y, g_x * e_y - g_y * e_x - g_th)  # e^T Gamma D_b
-    along_v = sum(r * j[0] for r, j in zip(row, jacobian))  # ... J_b^n, the v_c column
-    along_omega = sum(r * j[1] for r, j in zip(row, jacobian))  # and the omega_c column
+    along_v = sum(r * j[0] for r, j in zip(row, jacobian, strict=True))  # ... J_b^n, the v_c column
+    along_omega = sum(r * j[1] for r, j in zip(row, jacobian, strict=True))  # and the omega_c column
     return along_v * e_x, along_omega * (v_r * e_y), along_omega * (v_r * math.sin(e_th))
 
 
@@ -365,26 +417,31 @@ def nn_adaptive_step(nominal: Robot, options: AdaptiveOptions) -> Callable:
         # neither learn from it nor adapt the gains after it
         usable = memory.started and not memory.previous_saturated
         if usable:  # learn the last transition (SPEC 3.7, online)
-            z_normalised = [z / s for z, s in zip(memory.previous_input, options.input_scales)]
-            target = [d / s for d, s in zip(body_increment(memory.previous_pose, y), options.output_scales)]
+            z_normalised = [z / s for z, s in zip(memory.previous_input, options.input_scales, strict=True)]
+            target = [
+                d / s for d, s in zip(body_increment(memory.previous_pose, y), options.output_scales, strict=True)
+            ]
             train_step(memory.network, memory.velocity, z_normalised, target, options)
 
         gains = memory.gains
         if usable and math.hypot(error[0], error[1]) < options.gate_error and t >= options.freeze_time:  # SPEC 3.6
             v_c, omega_c = kanayama(error, v, omega, ref, *gains)[:2]  # the current gains' command, clamped
-            jacobian = emulator_jacobian(memory.network, options, [clamp(v_c, limits[0]), clamp(omega_c, limits[1]),
-                                                                   v, omega])
+            jacobian = emulator_jacobian(
+                memory.network, options, [clamp(v_c, limits[0]), clamp(omega_c, limits[1]), v, omega]
+            )
             gradient = gain_gradient(error, ref[3], options.gamma, jacobian)
             for i in range(3):  # eq. 26 made implementable: momentum, leakage, clip, box (SPEC 3.6)
-                change = (-tc * options.rates[i] * gradient[i] + options.gain_momentum * memory.last_step[i]
-                          - tc * options.leakage * (gains[i] - options.gains[i]))
+                change = (
+                    -tc * options.rates[i] * gradient[i]
+                    + options.gain_momentum * memory.last_step[i]
+                    - tc * options.leakage * (gains[i] - options.gains[i])
+                )
                 memory.last_step[i] = clamp(change, options.max_step[i])
                 gains[i] = min(max(gains[i] + memory.last_step[i], options.gain_min[i]), options.gain_max[i])
         else:
             memory.last_step = [0.0, 0.0, 0.0]  # a closed gate also stops the gain momentum
 
-        v_c, omega_c, v_c_dot, omega_c_dot, saturated = clamp_command(
-            *kanayama(error, v, omega, ref, *gains), *limits)
+        v_c, omega_c, v_c_dot, omega_c_dot, saturated = clamp_command(*kanayama(error, v, omega, ref, *gains), *limits)
         tau_r, tau_l = unsaturated_torque(nominal, v, omega, v_c, omega_c, v_c_dot, omega_c_dot, options.kc)
         memory.previous_saturated = saturated or abs(tau_r) > nominal.max_torque or abs(tau_l) > nominal.max_torque
         memory.previous_pose, memory.previous_input, memory.started = (y[0], y[1], y[2]), [v_c, omega_c, v, omega], True
@@ -396,8 +453,18 @@ def nn_adaptive_step(nominal: Robot, options: AdaptiveOptions) -> Callable:
 # --- the closed loop -----------------------------------------------------------------------------
 
 
-def simulate(step: Callable, memory: Any, plant: Robot, disturbance: Disturbance, line: Line, x0: State, *,
-             n_steps: int, control_period: float, substeps: int) -> list[State]:
+def simulate(
+    step: Callable,
+    memory: Any,
+    plant: Robot,
+    disturbance: Disturbance,
+    line: Line,
+    x0: State,
+    *,
+    n_steps: int,
+    control_period: float,
+    substeps: int,
+) -> list[State]:
     """The discrete loop of SPEC 2.7 with a zero-order hold; returns the states x_0 .. x_{N-1}
     (the rows of ``ddtrack.SimResult.state``)."""
     state = tuple(float(s) for s in x0)
@@ -411,25 +478,64 @@ def simulate(step: Callable, memory: Any, plant: Robot, disturbance: Disturbance
         dist_r = d.bias[0] + d.amplitude[0] * math.sin(d.frequency * t + d.phase[0])
         dist_l = d.bias[1] + d.amplitude[1] * math.sin(d.frequency * t + d.phase[1])
         states.append(state)
-        state = rk4(lambda z: derivative(plant, z, tau_r, tau_l, dist_r, dist_l), state, control_period, substeps)
+        inputs = (tau_r, tau_l, dist_r, dist_l)
+        state = rk4(lambda z, u=inputs: derivative(plant, z, *u), state, control_period, substeps)
     return states
 
 
-def run_backstepping(*, plant: Robot, nominal: Robot, disturbance: Disturbance, line: Line, x0: State,
-                     gains: BacksteppingGains, n_steps: int, control_period: float, substeps: int) -> list[State]:
+def run_backstepping(
+    *,
+    plant: Robot,
+    nominal: Robot,
+    disturbance: Disturbance,
+    line: Line,
+    x0: State,
+    gains: BacksteppingGains,
+    n_steps: int,
+    control_period: float,
+    substeps: int,
+) -> list[State]:
     """One backstepping run; the keyword arguments are what :func:`params_from_scenario` returns."""
-    return simulate(backstepping_step(nominal, gains), (), plant, disturbance, line, x0,
-                    n_steps=n_steps, control_period=control_period, substeps=substeps)
+    return simulate(
+        backstepping_step(nominal, gains),
+        (),
+        plant,
+        disturbance,
+        line,
+        x0,
+        n_steps=n_steps,
+        control_period=control_period,
+        substeps=substeps,
+    )
 
 
-def run_nn_adaptive(*, plant: Robot, nominal: Robot, disturbance: Disturbance, line: Line, x0: State,
-                    adaptive: AdaptiveOptions, network: Network, n_steps: int, control_period: float,
-                    substeps: int) -> list[State]:
+def run_nn_adaptive(
+    *,
+    plant: Robot,
+    nominal: Robot,
+    disturbance: Disturbance,
+    line: Line,
+    x0: State,
+    adaptive: AdaptiveOptions,
+    network: Network,
+    n_steps: int,
+    control_period: float,
+    substeps: int,
+) -> list[State]:
     """One NN-adaptive run; the keyword arguments are what :func:`params_from_nn_setup` returns.
     ``network`` holds the emulator's initial weights; it is copied, so every run starts from them."""
     memory = AdaptiveMemory(gains=list(adaptive.gains), network=network.copy(), velocity=network.zeros())
-    return simulate(nn_adaptive_step(nominal, adaptive), memory, plant, disturbance, line, x0,
-                    n_steps=n_steps, control_period=control_period, substeps=substeps)
+    return simulate(
+        nn_adaptive_step(nominal, adaptive),
+        memory,
+        plant,
+        disturbance,
+        line,
+        x0,
+        n_steps=n_steps,
+        control_period=control_period,
+        substeps=substeps,
+    )
 
 
 # --- reading a ddtrack scenario ------------------------------------------------------------------
@@ -440,8 +546,14 @@ def _robot(params: Any) -> Robot:
 
 
 # the NN-adaptive options this loop implements: the defaults of ddtrack's NNAdaptiveConfig
-NN_CHOICES = {"jacobian": "network", "error_jacobian": "exact", "emulator": "E1", "online_learning": True,
-              "learn_saturated": False, "structured_jacobian": False}
+NN_CHOICES = {
+    "jacobian": "network",
+    "error_jacobian": "exact",
+    "emulator": "E1",
+    "online_learning": True,
+    "learn_saturated": False,
+    "structured_jacobian": False,
+}
 
 
 def params_from_scenario(scenario: Any) -> dict[str, Any]:
@@ -452,8 +564,14 @@ def params_from_scenario(scenario: Any) -> dict[str, Any]:
     params = _loop_params(scenario, "backstepping", [])
     control = scenario.controller
     kx, ky, ktheta = control.gains
-    params["gains"] = BacksteppingGains(kx=kx, ky=ky, ktheta=ktheta, kc=tuple(control.kc),
-                                        max_velocity=control.max_velocity, max_yaw_rate=control.max_yaw_rate)
+    params["gains"] = BacksteppingGains(
+        kx=kx,
+        ky=ky,
+        ktheta=ktheta,
+        kc=tuple(control.kc),
+        max_velocity=control.max_velocity,
+        max_yaw_rate=control.max_yaw_rate,
+    )
     return params
 
 
@@ -464,22 +582,38 @@ def params_from_nn_setup(scenario: Any, setup: Any) -> dict[str, Any]:
     this module's. Refuses, loudly, the options this loop does not implement.
     """
     control = scenario.controller
-    unsupported = [f"controller.{name} = {getattr(control, name)!r}" for name, value in NN_CHOICES.items()
-                   if getattr(control, name, value) != value]
+    unsupported = [
+        f"controller.{name} = {getattr(control, name)!r}"
+        for name, value in NN_CHOICES.items()
+        if getattr(control, name, value) != value
+    ]
     params = _loop_params(scenario, "nn_adaptive_backstepping", unsupported)
     law = setup.controller.outer
     floats = lambda values: tuple(float(x) for x in values)  # noqa: E731
     mlp = law.emulator.mlp
     params["network"] = Network(w1=mlp.w1.tolist(), b1=mlp.b1.tolist(), w2=mlp.w2.tolist(), b2=mlp.b2.tolist())
     params["adaptive"] = AdaptiveOptions(
-        gains=floats(law.gains), kc=floats(control.kc), max_velocity=float(law.max_velocity),
-        max_yaw_rate=float(law.max_yaw_rate), control_period=float(law.control_period), rates=floats(law.rates),
-        gain_momentum=float(law.gain_momentum), max_step=floats(law.max_step), gain_min=floats(law.gain_min),
-        gain_max=floats(law.gain_max), gate_error=float(law.gate_error), leakage=float(law.leakage),
-        gamma=floats(law.gamma), learning_rate=float(law.learning_rate), momentum=float(law.momentum),
-        clip_norm=float(law.clip_norm), freeze_time=float(law.freeze_time),
-        input_scales=floats(law.emulator.scales.inputs), output_scales=floats(law.emulator.scales.outputs),
-        jacobian_scale=float(law.analytic_coefficients[0]))
+        gains=floats(law.gains),
+        kc=floats(control.kc),
+        max_velocity=float(law.max_velocity),
+        max_yaw_rate=float(law.max_yaw_rate),
+        control_period=float(law.control_period),
+        rates=floats(law.rates),
+        gain_momentum=float(law.gain_momentum),
+        max_step=floats(law.max_step),
+        gain_min=floats(law.gain_min),
+        gain_max=floats(law.gain_max),
+        gate_error=float(law.gate_error),
+        leakage=float(law.leakage),
+        gamma=floats(law.gamma),
+        learning_rate=float(law.learning_rate),
+        momentum=float(law.momentum),
+        clip_norm=float(law.clip_norm),
+        freeze_time=float(law.freeze_time),
+        input_scales=floats(law.emulator.scales.inputs),
+        output_scales=floats(law.emulator.scales.outputs),
+        jacobian_scale=float(law.analytic_coefficients[0]),
+    )
     return params
 
 
@@ -503,24 +637,28 @@ def _loop_params(scenario: Any, controller: str, unsupported: list[str]) -> dict
         raise ValueError("bench/python_loop.py does not implement: " + "; ".join(unsupported))
 
     wheel = scenario.disturbance.build()
-    disturbance = Disturbance(bias=tuple(map(float, wheel.bias)), amplitude=tuple(map(float, wheel.amplitude)),
-                              frequency=float(wheel.frequency), phase=tuple(map(float, wheel.phase)))
+    disturbance = Disturbance(
+        bias=tuple(map(float, wheel.bias)),
+        amplitude=tuple(map(float, wheel.amplitude)),
+        frequency=float(wheel.frequency),
+        phase=tuple(map(float, wheel.phase)),
+    )
     trajectory = scenario.trajectory
     pose = scenario.initial.pose
     if pose is None:  # start on the reference
         ref0 = line_reference(Line(tuple(trajectory.start), trajectory.heading, trajectory.speed), 0.0)
         pose = ref0[:3]
     sim = scenario.simulation
-    return dict(
-        plant=_robot(scenario.plant_params()),
-        nominal=_robot(scenario.robot.params()),
-        disturbance=disturbance,
-        line=Line(start=tuple(trajectory.start), heading=float(trajectory.heading), speed=float(trajectory.speed)),
-        x0=(*map(float, pose), *map(float, scenario.initial.velocity)),
-        n_steps=sim.n_steps,
-        control_period=sim.control_period,
-        substeps=sim.substeps,
-    )
+    return {
+        "plant": _robot(scenario.plant_params()),
+        "nominal": _robot(scenario.robot.params()),
+        "disturbance": disturbance,
+        "line": Line(start=tuple(trajectory.start), heading=float(trajectory.heading), speed=float(trajectory.speed)),
+        "x0": (*map(float, pose), *map(float, scenario.initial.velocity)),
+        "n_steps": sim.n_steps,
+        "control_period": sim.control_period,
+        "substeps": sim.substeps,
+    }
 
 
 # --- the whole process: a plain script of the case ------------------------------------------------
@@ -536,30 +674,51 @@ def params_from_toml(path: str | Path) -> dict[str, Any]:
     nominal = {**defaults, **{k: float(v) for k, v in doc["robot"].items() if k in Robot.__dataclass_fields__}}
     missing = [f"robot.{k}" for k in robot_keys if k not in nominal]
     control, trajectory, disturbance = doc["controller"], doc["trajectory"], doc.get("disturbance", {"kind": "none"})
-    unsupported = [f"{name} = {value!r}" for name, value, wanted in (
-        ("controller.kind", control.get("kind"), "backstepping"), ("controller.inner", control.get("inner"),
-                                                                   "computed_torque"),
-        ("trajectory.kind", trajectory.get("kind"), "line"), ("disturbance.kind", disturbance.get("kind"), "sinusoid"),
-    ) if value != wanted] + [f"[{section}]" for section in ("noise", "randomize") if doc.get(section)]
+    unsupported = [
+        f"{name} = {value!r}"
+        for name, value, wanted in (
+            ("controller.kind", control.get("kind"), "backstepping"),
+            ("controller.inner", control.get("inner"), "computed_torque"),
+            ("trajectory.kind", trajectory.get("kind"), "line"),
+            ("disturbance.kind", disturbance.get("kind"), "sinusoid"),
+        )
+        if value != wanted
+    ] + [f"[{section}]" for section in ("noise", "randomize") if doc.get(section)]
     missing += [f"controller.{k}" for k in ("gains", "kc", "max_velocity", "max_yaw_rate") if k not in control]
     if missing or unsupported or doc.get("initial", {}).get("pose") is None:
-        raise ValueError(f"bench/python_loop.py reads only the paper's line case; missing {missing}, "
-                         f"unsupported {unsupported} (and initial.pose must be given)")
+        raise ValueError(
+            f"bench/python_loop.py reads only the paper's line case; missing {missing}, "
+            f"unsupported {unsupported} (and initial.pose must be given)"
+        )
     plant = {**nominal, **{k: float(v) for k, v in doc.get("plant", {}).items() if k in Robot.__dataclass_fields__}}
     sim = doc["simulation"]
     kx, ky, ktheta = map(float, control["gains"])
     pair = lambda values: (float(values[0]), float(values[1]))  # noqa: E731
-    return dict(
-        plant=Robot(**plant), nominal=Robot(**nominal),
-        disturbance=Disturbance(bias=pair(disturbance.get("bias", (0, 0))), amplitude=pair(disturbance["amplitude"]),
-                                frequency=float(disturbance["frequency"]), phase=pair(disturbance.get("phase", (0, 0)))),
-        line=Line(start=pair(trajectory["start"]), heading=float(trajectory["heading"]), speed=float(trajectory["speed"])),
-        x0=(*map(float, doc["initial"]["pose"]), *map(float, doc["initial"].get("velocity", (0, 0)))),
-        gains=BacksteppingGains(kx=kx, ky=ky, ktheta=ktheta, kc=pair(control["kc"]),
-                                max_velocity=float(control["max_velocity"]), max_yaw_rate=float(control["max_yaw_rate"])),
-        n_steps=round(float(sim["duration"]) / float(sim["control_period"])),
-        control_period=float(sim["control_period"]), substeps=int(sim.get("substeps", 1)),
-    )
+    return {
+        "plant": Robot(**plant),
+        "nominal": Robot(**nominal),
+        "disturbance": Disturbance(
+            bias=pair(disturbance.get("bias", (0, 0))),
+            amplitude=pair(disturbance["amplitude"]),
+            frequency=float(disturbance["frequency"]),
+            phase=pair(disturbance.get("phase", (0, 0))),
+        ),
+        "line": Line(
+            start=pair(trajectory["start"]), heading=float(trajectory["heading"]), speed=float(trajectory["speed"])
+        ),
+        "x0": (*map(float, doc["initial"]["pose"]), *map(float, doc["initial"].get("velocity", (0, 0)))),
+        "gains": BacksteppingGains(
+            kx=kx,
+            ky=ky,
+            ktheta=ktheta,
+            kc=pair(control["kc"]),
+            max_velocity=float(control["max_velocity"]),
+            max_yaw_rate=float(control["max_yaw_rate"]),
+        ),
+        "n_steps": round(float(sim["duration"]) / float(sim["control_period"])),
+        "control_period": float(sim["control_period"]),
+        "substeps": int(sim.get("substeps", 1)),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -567,8 +726,9 @@ def main(argv: list[str] | None = None) -> int:
     (read the TOML, simulate, write the states, print the final tracking error): bench/speed.py's baseline for
     the ``ddtrack run`` command."""
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
-    parser.add_argument("scenario", nargs="?", default=Path(__file__).resolve().parent.parent / "scenarios"
-                        / "paper_line.toml")
+    parser.add_argument(
+        "scenario", nargs="?", default=Path(__file__).resolve().parent.parent / "scenarios" / "paper_line.toml"
+    )
     parser.add_argument("--out", help="CSV file of the states: t, x, y, theta, v, omega")
     args = parser.parse_args(argv)
     params = params_from_toml(args.scenario)

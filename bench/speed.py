@@ -37,6 +37,7 @@ In one process, in this order:
 
 Medians resist the noise of a shared machine; the minimum of each series is reported beside it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -88,7 +89,7 @@ def machine_info() -> dict[str, object]:
         "jaxlib": jaxlib.__version__,
         "numpy": numpy.__version__,
         "jax_backend": jax.default_backend(),
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
 
 
@@ -109,23 +110,29 @@ def check_agreement(ddtrack_states, python_states) -> float:
     difference = float(np.max(np.abs(a - b)))
     if not difference <= TOLERANCE:  # also catches NaN
         row = int(np.argmax(np.max(np.abs(a - b), axis=1)))
-        raise Disagreement(f"python loop and ddtrack disagree by {difference:.3g} (> {TOLERANCE:g}), first worst at "
-                           f"row {row}: python {a[row].tolist()} vs ddtrack {b[row].tolist()}")
+        raise Disagreement(
+            f"python loop and ddtrack disagree by {difference:.3g} (> {TOLERANCE:g}), first worst at "
+            f"row {row}: python {a[row].tolist()} vs ddtrack {b[row].tolist()}"
+        )
     return difference
 
 
-def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, control_repeats: int,
-                    batch_sizes: list[int]) -> dict[str, object]:
+def measure_library(
+    repeats: int, python_repeats: int, python_nn_repeats: int, control_repeats: int, batch_sizes: list[int]
+) -> dict[str, object]:
     start = time.perf_counter()
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)))  # as the ddtrack command: batches use every core
+    jax.config.update(
+        "jax_num_cpu_devices", len(os.sched_getaffinity(0))
+    )  # as the ddtrack command: batches use every core
+
+    from python_loop import params_from_nn_setup, params_from_scenario, run_backstepping, run_nn_adaptive
 
     import ddtrack
     from ddtrack.runner import run_setup
-    from python_loop import params_from_nn_setup, params_from_scenario, run_backstepping, run_nn_adaptive
 
     import_s = time.perf_counter() - start
     jax.config.update("jax_enable_compilation_cache", False)  # a real compile, whatever the environment says
@@ -143,20 +150,28 @@ def measure_library(repeats: int, python_repeats: int, python_nn_repeats: int, c
     params = params_from_scenario(scenario)
     difference = check_agreement(result.state, run_backstepping(**params))
     # the NN loop starts from ddtrack's initial emulator weights: no identification to redo by hand
-    nn_free = ddtrack.load_scenario(SCENARIO, controller="nn_adaptive_backstepping",
-                                    overrides=["controller.identification=false"])
+    nn_free = ddtrack.load_scenario(
+        SCENARIO, controller="nn_adaptive_backstepping", overrides=["controller.identification=false"]
+    )
     nn_free_setup, nn_free_draws = ddtrack.prepare(nn_free)
     nn_params = params_from_nn_setup(nn_free, nn_free_setup)
-    nn_difference = check_agreement(run_setup(nn_free, nn_free_setup, nn_free_draws).state,
-                                    run_nn_adaptive(**nn_params))
+    nn_difference = check_agreement(
+        run_setup(nn_free, nn_free_setup, nn_free_draws).state, run_nn_adaptive(**nn_params)
+    )
 
     single = timings(run_ddtrack, repeats)
 
     setup, draws = ddtrack.prepare(scenario)
     sim = scenario.simulation
     plant = setup.plant
-    options = dict(n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
-                   disturbance=setup.disturbance, noise=setup.noise, divergence_error=scenario.divergence_distance())
+    options = {
+        "n_steps": sim.n_steps,
+        "control_period": sim.control_period,
+        "substeps": sim.substeps,
+        "disturbance": setup.disturbance,
+        "noise": setup.noise,
+        "divergence_error": scenario.divergence_distance(),
+    }
     x0 = jnp.asarray(setup.x0)
 
     def simulate_only():
@@ -241,8 +256,9 @@ def measure_cli(repeats: int) -> dict[str, object]:
 
         def timed(args: list[str], cache: Path) -> float:
             start = time.perf_counter()
-            done = subprocess.run(args, cwd=ROOT, env={**env, "DDTRACK_CACHE_DIR": str(cache)}, capture_output=True,
-                                  text=True)
+            done = subprocess.run(
+                args, cwd=ROOT, env={**env, "DDTRACK_CACHE_DIR": str(cache)}, capture_output=True, text=True
+            )
             elapsed = time.perf_counter() - start
             if done.returncode != 0:
                 raise RuntimeError(f"`{' '.join(args)}` exited {done.returncode}:\n{done.stdout}{done.stderr}")
@@ -256,18 +272,42 @@ def measure_cli(repeats: int) -> dict[str, object]:
             cold.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"cold{i}")], cache))
             entries.append(sum(1 for p in cache.rglob("*") if p.is_file()))
             warm.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"warm{i}")], cache))
-        phases = json.loads(subprocess.run(
-            [sys.executable, str(ROOT / "bench" / "cli_phases.py"), str(SCENARIO), "--json", "--cache",
-             str(scratch / "cache0")], cwd=ROOT, env=env, capture_output=True, text=True, check=True).stdout)
+        phases = json.loads(
+            subprocess.run(
+                [
+                    sys.executable,
+                    str(ROOT / "bench" / "cli_phases.py"),
+                    str(SCENARIO),
+                    "--json",
+                    "--cache",
+                    str(scratch / "cache0"),
+                ],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout
+        )
     python_s = statistics.median(plain)
-    return {"python_process_s": python_s, "python_process_min_s": min(plain),
-            "cold_cli_s": statistics.median(cold), "cold_cli_min_s": min(cold), "warm_cli_s": statistics.median(warm),
-            "warm_cli_min_s": min(warm), "ratio_cold": statistics.median(cold) / python_s,
-            "ratio_cold_min": min(cold) / min(plain), "ratio_warm": statistics.median(warm) / python_s,
-            "ratio_warm_min": min(warm) / min(plain), "cli_repeats": repeats, "cli_cache_files": entries[0],
-            **{f"phase_{name}": value for name, value in phases.items()},
-            "cli_command": " ".join([Path(command[0]).name, *command[1:], "run", "scenarios/paper_line.toml",
-                                     "--out", "<tmp>"])}
+    return {
+        "python_process_s": python_s,
+        "python_process_min_s": min(plain),
+        "cold_cli_s": statistics.median(cold),
+        "cold_cli_min_s": min(cold),
+        "warm_cli_s": statistics.median(warm),
+        "warm_cli_min_s": min(warm),
+        "ratio_cold": statistics.median(cold) / python_s,
+        "ratio_cold_min": min(cold) / min(plain),
+        "ratio_warm": statistics.median(warm) / python_s,
+        "ratio_warm_min": min(warm) / min(plain),
+        "cli_repeats": repeats,
+        "cli_cache_files": entries[0],
+        **{f"phase_{name}": value for name, value in phases.items()},
+        "cli_command": " ".join(
+            [Path(command[0]).name, *command[1:], "run", "scenarios/paper_line.toml", "--out", "<tmp>"]
+        ),
+    }
 
 
 ROWS = [
@@ -302,13 +342,17 @@ ROWS = [
 
 
 def table(result: dict[str, object]) -> str:
-    lines = [f"ddtrack speed benchmark: {SCENARIO.relative_to(ROOT)}",
-             f"{result['cpu']} ({result['cores']} cores), python {result['python']}, jax {result['jax']}, "
-             f"numpy {result['numpy']}, {result['date']}, load average {result['load_average_start']}"]
+    lines = [
+        f"ddtrack speed benchmark: {SCENARIO.relative_to(ROOT)}",
+        f"{result['cpu']} ({result['cores']} cores), python {result['python']}, jax {result['jax']}, "
+        f"numpy {result['numpy']}, {result['date']}, load average {result['load_average_start']}",
+    ]
     if "n_steps" in result:
-        lines += [f"{result['n_steps']} control periods x {result['substeps']} RK4 substeps; states agree to "
-                  f"{result['max_abs_state_difference']:.1e} (backstepping), "
-                  f"{result['max_abs_state_difference_nn']:.1e} (NN-adaptive)"]
+        lines += [
+            f"{result['n_steps']} control periods x {result['substeps']} RK4 substeps; states agree to "
+            f"{result['max_abs_state_difference']:.1e} (backstepping), "
+            f"{result['max_abs_state_difference_nn']:.1e} (NN-adaptive)"
+        ]
     lines.append("")
     for key, label in ROWS:
         if key not in result:
@@ -334,17 +378,29 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--repeats", type=int, default=20, help="timed ddtrack runs (median reported)")
-    parser.add_argument("--python-repeats", type=int, default=None,
-                        help="timed Python-loop runs [default: min(repeats, 5)]")
-    parser.add_argument("--python-nn-repeats", type=int, default=3,
-                        help="timed Python NN-loop runs, under a second each [default 3]")
+    parser.add_argument(
+        "--python-repeats", type=int, default=None, help="timed Python-loop runs [default: min(repeats, 5)]"
+    )
+    parser.add_argument(
+        "--python-nn-repeats", type=int, default=3, help="timed Python NN-loop runs, under a second each [default 3]"
+    )
     parser.add_argument("--cli-repeats", type=int, default=3, help="cold and warm CLI runs each [default 3]")
-    parser.add_argument("--control-repeats", type=int, default=3,
-                        help="timed python-control runs (pip install -e '.[bench]'), about 1.2 s each; 0 skips them")
-    parser.add_argument("--cli-only", action="store_true",
-                        help="only the whole-process figures: ddtrack run cold and warm against the plain Python script")
-    parser.add_argument("--batch-sizes", default="256,1024",
-                        help="batch sizes tried for the batch throughput (comma-separated); '' skips it")
+    parser.add_argument(
+        "--control-repeats",
+        type=int,
+        default=3,
+        help="timed python-control runs (pip install -e '.[bench]'), about 1.2 s each; 0 skips them",
+    )
+    parser.add_argument(
+        "--cli-only",
+        action="store_true",
+        help="only the whole-process figures: ddtrack run cold and warm against the plain Python script",
+    )
+    parser.add_argument(
+        "--batch-sizes",
+        default="256,1024",
+        help="batch sizes tried for the batch throughput (comma-separated); '' skips it",
+    )
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.cli_repeats < 0 or args.control_repeats < 0:
         parser.error("--repeats must be >= 1, --cli-repeats and --control-repeats >= 0")
@@ -353,9 +409,13 @@ def main(argv: list[str] | None = None) -> int:
 
     load_start = load_average()
     try:
-        figures = {} if args.cli_only else measure_library(
-            args.repeats, max(1, python_repeats), max(1, args.python_nn_repeats), args.control_repeats,
-            batch_sizes)  # imports jax: first
+        figures = (
+            {}
+            if args.cli_only
+            else measure_library(
+                args.repeats, max(1, python_repeats), max(1, args.python_nn_repeats), args.control_repeats, batch_sizes
+            )
+        )  # imports jax: first
         if args.cli_repeats or args.cli_only:
             figures.update(measure_cli(max(1, args.cli_repeats)))
     except Disagreement as exc:

@@ -7,6 +7,7 @@ figure-eight scenario's robot, plant, disturbance, noise and controller with thi
 
     python examples/custom_trajectory.py [--duration SECONDS]
 """
+
 # test-args: --duration 20
 import argparse
 import dataclasses
@@ -39,17 +40,31 @@ parser.add_argument("--duration", type=float, default=60.0, help="seconds to sim
 args = parser.parse_args()
 
 ref0 = Bernoulli()(0.0)
-print(f"reference at t = 0: ({float(ref0.x):.2f}, {float(ref0.y):.2f}) m, heading {float(ref0.theta):.3f} rad, "
-      f"speed {float(ref0.v):.3f} m/s, yaw rate {float(ref0.omega):.3f} rad/s")
+print(
+    f"reference at t = 0: ({float(ref0.x):.2f}, {float(ref0.y):.2f}) m, heading {float(ref0.theta):.3f} rad, "
+    f"speed {float(ref0.v):.3f} m/s, yaw rate {float(ref0.omega):.3f} rad/s"
+)
 base = Path(__file__).resolve().parents[1] / "scenarios" / "figure_eight.toml"
-scenario = ddtrack.load_scenario(base, overrides=[f"simulation.duration={args.duration}",
-                                                  f"simulation.metric_window=[{args.duration / 4}, {args.duration}]"])
+scenario = ddtrack.load_scenario(
+    base,
+    overrides=[
+        f"simulation.duration={args.duration}",
+        f"simulation.metric_window=[{args.duration / 4}, {args.duration}]",
+    ],
+)
 setup, draws = ddtrack.prepare(scenario)
 x0 = jnp.array([ref0.x, ref0.y - 0.3, ref0.theta, 0.0, 0.0])  # start 0.3 m off the path, at rest
 setup = dataclasses.replace(setup, trajectory=Bernoulli(), x0=x0)
 result = run_setup(scenario, setup, draws)
 sim = scenario.simulation
-metrics = ddtrack.summarize(ddtrack.timeseries(result), status=result.status_name, window=sim.window,
-                            control_period=sim.control_period, settling_threshold=sim.settling_threshold)
-print(f"backstepping on the lemniscate: status {metrics['status']}, e_tr_mean {metrics['e_tr_mean']:.4f} m "
-      f"over [{sim.window[0]:g}, {sim.window[1]:g}] s, settling {metrics['settling_time']} s")
+metrics = ddtrack.summarize(
+    ddtrack.timeseries(result),
+    status=result.status_name,
+    window=sim.window,
+    control_period=sim.control_period,
+    settling_threshold=sim.settling_threshold,
+)
+print(
+    f"backstepping on the lemniscate: status {metrics['status']}, e_tr_mean {metrics['e_tr_mean']:.4f} m "
+    f"over [{sim.window[0]:g}, {sim.window[1]:g}] s, settling {metrics['settling_time']} s"
+)

@@ -7,6 +7,7 @@ installed, ``pandas.read_parquet`` reads the same file.
 
     python examples/load_parquet.py [SCENARIO] [--set SECTION.KEY=VALUE ...]
 """
+
 import json
 import sys
 import tempfile
@@ -36,5 +37,7 @@ for name in ("x", "y", "v", "e_tr", "tau_r", "tau_l"):
 settled = t[series["e_tr"] < 0.1]  # first time the robot came within 10 cm of its reference
 print(f"first within 0.1 m at t = {settled[0]:.2f} s" if len(settled) else "never within 0.1 m")
 peak_r, peak_l = np.abs(series["tau_r"]).max(), np.abs(series["tau_l"]).max()
-print(f"peak |torque|: right {peak_r:.2f} N m, left {peak_l:.2f} N m; "
-      f"e_tr_mean {metrics['e_tr_mean']:.4f} m over {metrics['window']} s")
+print(
+    f"peak |torque|: right {peak_r:.2f} N m, left {peak_l:.2f} N m; "
+    f"e_tr_mean {metrics['e_tr_mean']:.4f} m over {metrics['window']} s"
+)

@@ -8,6 +8,7 @@ confidence interval (``ddtrack.metrics.mean_ci``, inside [0, inf) for an error),
 
     python examples/monte_carlo.py [--seeds N] [--scenario FILE]
 """
+
 # test-args: --seeds 6
 import argparse
 from pathlib import Path
@@ -22,8 +23,10 @@ parser.add_argument("--seeds", type=int, default=32, help="runs, seeds 0 .. N-1"
 parser.add_argument("--scenario", default=Path(__file__).resolve().parents[1] / "scenarios" / "paper_line.toml")
 args = parser.parse_args()
 
-draws = ['randomize.mass={distribution="uniform", relative=0.2}',
-         'randomize.viscous_friction={distribution="uniform", relative=0.5}']
+draws = [
+    'randomize.mass={distribution="uniform", relative=0.2}',
+    'randomize.viscous_friction={distribution="uniform", relative=0.5}',
+]
 scenario = ddtrack.load_scenario(args.scenario, overrides=draws)
 rows = ddtrack.monte_carlo(scenario, list(range(args.seeds)), chunk_size=16)  # chunks bound the memory
 
@@ -35,8 +38,10 @@ for label, reduce in (("mean", np.mean), ("min", np.min), ("max", np.max)):
 
 ok = [r for r in rows if r["status"] == "ok"]
 e = mean_ci([r["e_tr_mean"] for r in ok], domain="nonnegative")
-print(f"\n{len(ok)} of {len(rows)} runs ok; e_tr_mean {e['mean']:.5f} m, 95 % CI [{e['ci_low']:.5f}, "
-      f"{e['ci_high']:.5f}] m\n")
+print(
+    f"\n{len(ok)} of {len(rows)} runs ok; e_tr_mean {e['mean']:.5f} m, 95 % CI [{e['ci_low']:.5f}, "
+    f"{e['ci_high']:.5f}] m\n"
+)
 friction = np.array([r["plant_viscous_friction"] for r in ok])
 errors = np.array([r["e_tr_mean"] for r in ok])
 edges = np.quantile(friction, [1 / 3, 2 / 3])

@@ -1,7 +1,8 @@
 """A random agent choosing the backstepping gains (Kx, Ky, Ktheta) every control period, for one episode.
 
-    python examples/random_agent.py [--steps N] [--seed S]
+python examples/random_agent.py [--steps N] [--seed S]
 """
+
 # test-args: --steps 200
 import argparse
 from pathlib import Path
@@ -22,6 +23,5 @@ total, steps, done = 0.0, 0, False
 while not done and (args.steps is None or steps < args.steps):
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())  # a in [-1, 1]^3 -> gains
     total, steps, done = total + reward, steps + 1, terminated or truncated
-print(f"{steps} steps ({info['t']:g} s), status {info['status']}, final e_tr {info['e_tr']:.3f} m, "
-      f"return {total:.1f}")
+print(f"{steps} steps ({info['t']:g} s), status {info['status']}, final e_tr {info['e_tr']:.3f} m, return {total:.1f}")
 env.close()

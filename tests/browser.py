@@ -4,6 +4,7 @@ No browser is downloaded (never ``playwright install``): the test setup installs
 with apt when it is missing and the tests run as root. Without it, the browser tests fail where the CI
 environment variable is set and are skipped elsewhere, with the reason.
 """
+
 from __future__ import annotations
 
 import os
@@ -17,8 +18,14 @@ from typing import Any
 
 CHROMIUM = Path("/usr/bin/chromium")
 #: this machine has no network: background services would only flood the console with failed requests
-FLAGS = ("--disable-gpu", "--no-first-run", "--disable-background-networking", "--disable-component-update",
-         "--disable-sync", "--disable-quic")
+FLAGS = (
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-quic",
+)
 INSTALL = (("apt-get", "update"), ("apt-get", "install", "-y", "chromium"))
 INSTALL_TIMEOUT = 1200  # [s] a cold apt cache and a slow mirror
 
@@ -27,9 +34,13 @@ def is_root() -> bool:
     return hasattr(os, "geteuid") and os.geteuid() == 0
 
 
-def ensure_chromium(executable: Path = CHROMIUM, *, root: bool | None = None,
-                    run: Callable[..., subprocess.CompletedProcess] = subprocess.run,
-                    which: Callable[[str], str | None] = shutil.which) -> str | None:
+def ensure_chromium(
+    executable: Path = CHROMIUM,
+    *,
+    root: bool | None = None,
+    run: Callable[..., subprocess.CompletedProcess] = subprocess.run,
+    which: Callable[[str], str | None] = shutil.which,
+) -> str | None:
     """Make ``executable`` available: nothing to do when it is there; as root, ``apt-get update`` then
     ``apt-get install -y chromium`` (non-interactive). Return None when it is usable, else why not."""
     if executable.is_file() and os.access(executable, os.X_OK):
@@ -75,8 +86,13 @@ def chromium_context(profile: Path) -> Iterator[Any]:
 
     with sync_playwright() as playwright:
         context = playwright.chromium.launch_persistent_context(
-            str(profile), executable_path=str(CHROMIUM), headless=True, args=launch_args(),
-            viewport={"width": 1280, "height": 900}, offline=True)
+            str(profile),
+            executable_path=str(CHROMIUM),
+            headless=True,
+            args=launch_args(),
+            viewport={"width": 1280, "height": 900},
+            offline=True,
+        )
         try:
             yield context
         finally:

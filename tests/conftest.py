@@ -1,4 +1,5 @@
 """Shared fixtures: paths of the shipped scenarios and a helper that runs the CLI in-process."""
+
 from __future__ import annotations
 
 from pathlib import Path

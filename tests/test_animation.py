@@ -1,22 +1,31 @@
 """``ddtrack animate`` and ddtrack.animation: frame times, the footprint, the GIF it writes, its errors."""
+
 from __future__ import annotations
 
 import shutil
 
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 from matplotlib.colors import to_rgb
 from PIL import Image
 
-from conftest import SCENARIOS
 from ddtrack.animation import animate, footprint, frame_indices, gains_moved, read_run
 from ddtrack.cli import main
 from ddtrack.errors import ConfigError
 from ddtrack.plotting import ADAPTIVE, ROBOT
 
 # On a line at 0.3 rad from its start, heading along it: the robot moves up and to the right (more right) for 4 s.
-ON_THE_LINE = ["--set", "simulation.duration=4", "--set", "simulation.metric_window=[0, 4]",
-               "--set", "trajectory.heading=0.3", "--set", "initial.pose=[0, 0, 0.3]"]
+ON_THE_LINE = [
+    "--set",
+    "simulation.duration=4",
+    "--set",
+    "simulation.metric_window=[0, 4]",
+    "--set",
+    "trajectory.heading=0.3",
+    "--set",
+    "initial.pose=[0, 0, 0.3]",
+]
 
 
 @pytest.fixture(scope="module")
@@ -119,7 +128,7 @@ def test_gains_panel_when_the_gains_moved(short_run, tmp_path):
 
 def test_a_folder_that_is_not_a_run_exits_2_and_writes_nothing(tmp_path, cli):
     (tmp_path / "scenario.toml").write_text((SCENARIOS / "paper_line.toml").read_text())
-    code, out, err = cli("animate", tmp_path)
+    code, _out, err = cli("animate", tmp_path)
     assert code == 2 and "timeseries.parquet missing" in err and "Traceback" not in err
     code, _, err = cli("animate", tmp_path / "nowhere")
     assert code == 2 and "is not a folder" in err

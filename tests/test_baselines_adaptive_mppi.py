@@ -1,5 +1,6 @@
 """Baselines C: adaptive backstepping (computed torque on online estimates of m, I_C, b_w) and MPPI over
 wheel torques: their defining properties, then each as a scenario controller."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -9,9 +10,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack.controllers import Backstepping, Cascade, VelocityCommand
 from ddtrack.controllers.baselines import MPPI, AdaptiveComputedTorque, regressor
 from ddtrack.model import RobotParams, reduced_input, reduced_mass, wheel_friction
@@ -23,8 +24,9 @@ KINDS = ("adaptive_backstepping", "mppi")
 
 def _scenario(name: str, kind: str, duration: int, *overrides: str):
     window = f"simulation.metric_window=[{duration // 2}, {duration}]"
-    return ddtrack.load_scenario(SCENARIOS / name, controller=kind,
-                                 overrides=[f"simulation.duration={duration}", window, *overrides])
+    return ddtrack.load_scenario(
+        SCENARIOS / name, controller=kind, overrides=[f"simulation.duration={duration}", window, *overrides]
+    )
 
 
 def _mean_error(result, scenario) -> float:
@@ -47,16 +49,27 @@ def _circle_run(kind: str):
 def test_regressor_is_the_reduced_model():
     rng = np.random.default_rng(5)
     for _ in range(50):
-        params = RobotParams(mass=rng.uniform(1, 50), inertia=rng.uniform(0.05, 5), com_offset=rng.uniform(-0.3, 0.3),
-                             wheel_radius=rng.uniform(0.02, 0.3), half_axle=rng.uniform(0.1, 1.0),
-                             viscous_friction=rng.uniform(0, 0.05))
+        params = RobotParams(
+            mass=rng.uniform(1, 50),
+            inertia=rng.uniform(0.05, 5),
+            com_offset=rng.uniform(-0.3, 0.3),
+            wheel_radius=rng.uniform(0.02, 0.3),
+            half_axle=rng.uniform(0.1, 1.0),
+            viscous_friction=rng.uniform(0, 0.05),
+        )
         nu, nu_c, nu_c_dot = (jnp.asarray(rng.uniform(-2, 2, 2)) for _ in range(3))
         md_omega = params.mass * params.com_offset * nu[1]
         coriolis = jnp.array([[0.0, -md_omega], [md_omega, 0.0]])  # V_bar(nu) (SPEC 1.3), applied to nu_c
-        expected = (reduced_mass(params) @ nu_c_dot + coriolis @ nu_c
-                    + reduced_input(params) @ wheel_friction(params, jnp.array([nu_c[0] + params.half_axle * nu_c[1],
-                                                                                nu_c[0] - params.half_axle * nu_c[1]])
-                                                             / params.wheel_radius))
+        expected = (
+            reduced_mass(params) @ nu_c_dot
+            + coriolis @ nu_c
+            + reduced_input(params)
+            @ wheel_friction(
+                params,
+                jnp.array([nu_c[0] + params.half_axle * nu_c[1], nu_c[0] - params.half_axle * nu_c[1]])
+                / params.wheel_radius,
+            )
+        )
         p = jnp.array([params.mass, params.inertia, params.viscous_friction])
         # |terms| <= ~1e4 (b_w / R^2): a few ulps of that
         np.testing.assert_allclose(regressor(params, nu, nu_c, nu_c_dot) @ p, expected, rtol=1e-12, atol=1e-10)
@@ -83,9 +96,18 @@ def test_update_follows_the_lyapunov_sign_and_stops_at_the_bounds():
 
 # figure-eight 6 m wide in 20 s (persistent excitation: |v_dot_r| and |omega_dot_r| keep changing), from rest at
 # the reference pose, true m and I_C +30 %, the same centre-of-mass offset, no friction, disturbance or noise
-EXCITED = ("plant.mass=13.0", "plant.inertia=0.728", "plant.com_offset=0.05", "plant.viscous_friction=0.0",
-           "plant.coulomb_friction=0.0", "disturbance.mean=[0, 0]", "disturbance.std=[0, 0]",
-           "noise.position_std=0", "noise.heading_std=0", "trajectory.period=20")
+EXCITED = (
+    "plant.mass=13.0",
+    "plant.inertia=0.728",
+    "plant.com_offset=0.05",
+    "plant.viscous_friction=0.0",
+    "plant.coulomb_friction=0.0",
+    "disturbance.mean=[0, 0]",
+    "disturbance.std=[0, 0]",
+    "noise.position_std=0",
+    "noise.heading_std=0",
+    "trajectory.period=20",
+)
 
 
 def test_adaptive_estimates_converge_under_persistent_excitation():
@@ -151,14 +173,19 @@ def test_tracks_the_paper_line_and_a_circle(kind):
     line = _scenario("paper_line.toml", kind, 20)
     assert line.controller.kind == kind  # selected by name over the file's backstepping
     circle, circle_result = _circle_run(kind)
-    for scenario, result, measured in ((line, ddtrack.run(line), MEASURED[kind][0]),
-                                       (circle, circle_result, MEASURED[kind][1])):
+    for scenario, result, measured in (
+        (line, ddtrack.run(line), MEASURED[kind][0]),
+        (circle, circle_result, MEASURED[kind][1]),
+    ):
         assert result.status_name == "ok"
         assert _mean_error(result, scenario) < 1.5 * measured  # below backstepping's 0.046 m
 
 
 def test_selectable_by_name():
-    for kind, config, law in (("adaptive_backstepping", AdaptiveBacksteppingConfig, Cascade), ("mppi", MPPIConfig, MPPI)):
+    for kind, config, law in (
+        ("adaptive_backstepping", AdaptiveBacksteppingConfig, Cascade),
+        ("mppi", MPPIConfig, MPPI),
+    ):
         scenario = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", controller=kind)
         assert isinstance(scenario.controller, config)
         assert isinstance(build(scenario).controller, law)
@@ -166,8 +193,11 @@ def test_selectable_by_name():
     assert isinstance(cascade.outer, Backstepping) and isinstance(cascade.inner, AdaptiveComputedTorque)
     # the estimates are bounded around the nominal model, which must lie inside the bounds
     with pytest.raises(ddtrack.ConfigError, match="controller.estimate_range"):
-        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", controller="adaptive_backstepping",
-                              overrides=["controller.estimate_range=[1.2, 2.0]"])
+        ddtrack.load_scenario(
+            SCENARIOS / "paper_line.toml",
+            controller="adaptive_backstepping",
+            overrides=["controller.estimate_range=[1.2, 2.0]"],
+        )
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -1,5 +1,6 @@
 """Baselines B: the LTV/LQR unicycle tracker (``ltv_lqr``) and sliding-mode backstepping with a boundary
 layer (``sliding_mode_backstepping``): their defining properties, then each as a scenario controller."""
+
 from __future__ import annotations
 
 import jax
@@ -7,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import SCENARIOS
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack.controllers import Backstepping, Cascade, ComputedTorque, VelocityCommand
 from ddtrack.controllers.baselines import LTVUnicycleLQR, SlidingModeTorque, switching_term, unicycle_error_model
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance, pose_rate, reduced_input, reduced_mass
@@ -42,10 +43,14 @@ def _gains(law: LTVUnicycleLQR, speeds: jax.Array) -> jax.Array:
     return jax.vmap(law.gain)(speeds)
 
 
-@pytest.mark.parametrize(("q_tol", "r_tol", "control_period"), [
-    ((0.0625, 0.125, 2.0), (1.0, 2.0), 0.01),  # WPILib's defaults
-    ((0.3, 0.05, 0.5), (0.5, 4.0), 0.02),
-], ids=["wpilib", "other"])
+@pytest.mark.parametrize(
+    ("q_tol", "r_tol", "control_period"),
+    [
+        ((0.0625, 0.125, 2.0), (1.0, 2.0), 0.01),  # WPILib's defaults
+        ((0.3, 0.05, 0.5), (0.5, 4.0), 0.02),
+    ],
+    ids=["wpilib", "other"],
+)
 def test_ltv_lqr_gain_is_the_dare_solution(q_tol, r_tol, control_period):
     speeds = np.array([0.0, 5e-5, 1e-4, 0.01, 0.5, 2.0, -0.5])
     law = LTVUnicycleLQR(q_tolerance=q_tol, r_tolerance=r_tol, control_period=control_period)
@@ -99,8 +104,9 @@ def test_switching_term_saturates_outside_the_layer_and_is_linear_inside():
         np.testing.assert_array_equal(switching_term(outside, gain, layer), np.sign(outside) * gain)  # reaching: K_s
         inside = layer * rng.uniform(-1.0, 1.0, 2)
         np.testing.assert_allclose(switching_term(inside, gain, layer), gain * inside / layer, rtol=1e-15)
-        np.testing.assert_allclose(switching_term(0.5 * inside, gain, layer),
-                                   0.5 * switching_term(inside, gain, layer), rtol=1e-15)  # linear in s
+        np.testing.assert_allclose(
+            switching_term(0.5 * inside, gain, layer), 0.5 * switching_term(inside, gain, layer), rtol=1e-15
+        )  # linear in s
     # the torque: computed torque plus B_bar^-1 M_hat K_s sat(s / phi); K_s = 0 is computed torque itself
     y = jnp.asarray([0.3, -0.2, 0.4, 0.35, 0.1])
     command = VelocityCommand(jnp.asarray([0.5, -0.3]), jnp.asarray([0.2, 0.1]), jnp.zeros(2), jnp.asarray(0.0))
@@ -136,14 +142,27 @@ def smc_runs():
     line = Line(start=(0.0, 0.0), heading=0.0, speed=0.5)
 
     def one(controller):
-        return simulate(DynamicPlant(EXACT), controller, line, jnp.zeros(5), Draws.zeros(SMC_STEPS),
-                        n_steps=SMC_STEPS, control_period=TC, disturbance=CONSTANT)
+        return simulate(
+            DynamicPlant(EXACT),
+            controller,
+            line,
+            jnp.zeros(5),
+            Draws.zeros(SMC_STEPS),
+            n_steps=SMC_STEPS,
+            control_period=TC,
+            disturbance=CONSTANT,
+        )
 
     result = jax.jit(jax.vmap(one))(stack(controllers))
     assert np.all(np.asarray(result.status) == 0)
     # s = nu_c - nu at each period, from the logged command and the (noise-free) state
-    s = np.stack([np.asarray(result.logs["v_cmd"]) - np.asarray(result.state[..., 3]),
-                  np.asarray(result.logs["omega_cmd"]) - np.asarray(result.state[..., 4])], axis=-1)
+    s = np.stack(
+        [
+            np.asarray(result.logs["v_cmd"]) - np.asarray(result.state[..., 3]),
+            np.asarray(result.logs["omega_cmd"]) - np.asarray(result.state[..., 4]),
+        ],
+        axis=-1,
+    )
     return np.asarray(result.t[0]), s, np.asarray(result.control)
 
 
@@ -183,8 +202,9 @@ KINDS = list(MEASURED)
 
 def _scenario(name: str, kind: str, duration: int):
     window = f"simulation.metric_window=[{duration // 2}, {duration}]"
-    return ddtrack.load_scenario(SCENARIOS / name, controller=kind,
-                                 overrides=[f"simulation.duration={duration}", window])
+    return ddtrack.load_scenario(
+        SCENARIOS / name, controller=kind, overrides=[f"simulation.duration={duration}", window]
+    )
 
 
 def _mean_error(result, scenario) -> float:
@@ -196,8 +216,10 @@ def _mean_error(result, scenario) -> float:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_tracks_the_paper_line_and_a_circle(kind):
-    for name, duration, measured in (("paper_line.toml", 20, MEASURED[kind][0]),
-                                     ("circle.toml", 10, MEASURED[kind][1])):
+    for name, duration, measured in (
+        ("paper_line.toml", 20, MEASURED[kind][0]),
+        ("circle.toml", 10, MEASURED[kind][1]),
+    ):
         scenario = _scenario(name, kind, duration)
         assert scenario.controller.kind == kind  # selected by name over the file's backstepping
         result = ddtrack.run(scenario)

@@ -3,6 +3,7 @@ regulated pure pursuit; and switching a scenario's controller kind.
 
 Whole runs are module fixtures, so each simulator structure compiles once.
 """
+
 from __future__ import annotations
 
 import math
@@ -10,9 +11,9 @@ import math
 import jax
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack.controllers import lyapunov
 from ddtrack.controllers.baselines import RegulatedPurePursuit
 from ddtrack.metrics import summarize
@@ -24,13 +25,22 @@ LINE = SCENARIOS / "paper_line.toml"
 CIRCLE = SCENARIOS / "circle.toml"
 # every random stream of a run in use (noise, a drawn mass), so batch rows differ by seed; the full duration,
 # so the single runs reuse the simulator compiled for the scenario's own run
-RANDOM = ["noise.position_std=0.001", "noise.heading_std=0.001", 'randomize.mass={distribution="uniform", relative=0.2}']
+RANDOM = [
+    "noise.position_std=0.001",
+    "noise.heading_std=0.001",
+    'randomize.mass={distribution="uniform", relative=0.2}',
+]
 
 
 def metrics(scenario, result) -> dict:
     sim = scenario.simulation
-    return summarize(ddtrack.timeseries(result), status=result.status_name, window=sim.window,
-                     control_period=sim.control_period, settling_threshold=sim.settling_threshold)
+    return summarize(
+        ddtrack.timeseries(result),
+        status=result.status_name,
+        window=sim.window,
+        control_period=sim.control_period,
+        settling_threshold=sim.settling_threshold,
+    )
 
 
 def full_run(path, kind):
@@ -46,8 +56,9 @@ def assert_batch_rows_equal_single_runs(kind):
     for i, seed in enumerate(seeds):
         single = ddtrack.run(scenario, seed=seed)
         for name in ("state", "control", "error"):  # the same float64 code, vmapped
-            np.testing.assert_allclose(np.asarray(getattr(row(batch, i), name)), np.asarray(getattr(single, name)),
-                                       rtol=0, atol=1e-12)
+            np.testing.assert_allclose(
+                np.asarray(getattr(row(batch, i), name)), np.asarray(getattr(single, name)), rtol=0, atol=1e-12
+            )
         assert int(row(batch, i).status) == int(single.status) == 0
     assert not np.allclose(np.asarray(row(batch, 0).state), np.asarray(row(batch, 1).state))
     return scenario
@@ -127,14 +138,17 @@ carrot_at = jax.jit(lambda law, t, y: law.carrot(t, y)[0])
 X_AXIS = Line(start=(0.0, 0.0), heading=0.0, speed=0.5)
 
 
-@pytest.mark.parametrize("pose, carrot, kappa", [
-    # beside the line 0.5 m: carrot (sqrt(1 - 0.25), 0), y_c = -0.5, kappa = 2 (-0.5) / 1
-    ((0.0, 0.5, 0.0), (math.sqrt(0.75), 0.0), -1.0),
-    # 0.5 m ahead of the reference point: the search runs forward to the point L ahead of the robot
-    ((0.5, 0.0, 0.0), (1.5, 0.0), 0.0),
-    # facing +y at (0.2, -0.3): carrot (0.2 + sqrt(1 - 0.09), 0); robot frame x_c = 0.3, y_c = -sqrt(0.91)
-    ((0.2, -0.3, math.pi / 2), (0.2 + math.sqrt(0.91), 0.0), -2.0 * math.sqrt(0.91)),
-])
+@pytest.mark.parametrize(
+    "pose, carrot, kappa",
+    [
+        # beside the line 0.5 m: carrot (sqrt(1 - 0.25), 0), y_c = -0.5, kappa = 2 (-0.5) / 1
+        ((0.0, 0.5, 0.0), (math.sqrt(0.75), 0.0), -1.0),
+        # 0.5 m ahead of the reference point: the search runs forward to the point L ahead of the robot
+        ((0.5, 0.0, 0.0), (1.5, 0.0), 0.0),
+        # facing +y at (0.2, -0.3): carrot (0.2 + sqrt(1 - 0.09), 0); robot frame x_c = 0.3, y_c = -sqrt(0.91)
+        ((0.2, -0.3, math.pi / 2), (0.2 + math.sqrt(0.91), 0.0), -2.0 * math.sqrt(0.91)),
+    ],
+)
 def test_the_carrot_lies_at_the_lookahead_and_kappa_is_two_y_over_l_squared(pose, carrot, kappa):
     law = pursuit(X_AXIS, lookahead=1.0)
     found = carrot_at(law, 0.0, np.array([*pose, 0.0, 0.0]))
@@ -178,8 +192,9 @@ def test_curvature_regulation_slows_on_a_tight_curve_only():
     np.testing.assert_array_equal(straight, [0.5, 0.0])
     unregulated, _, _ = command_at(pursuit(tight, search_samples=500, min_radius=0.0), 0.0, [0.0, -0.5, 0.0, 0.0, 0.0])
     assert unregulated[0] == 0.5
-    floored, _, _ = command_at(pursuit(tight, search_samples=500, min_regulated_speed=0.4), 0.0,
-                               [0.0, -0.5, 0.0, 0.0, 0.0])
+    floored, _, _ = command_at(
+        pursuit(tight, search_samples=500, min_regulated_speed=0.4), 0.0, [0.0, -0.5, 0.0, 0.0, 0.0]
+    )
     assert floored[0] == pytest.approx(0.4, abs=1e-15)
 
 
@@ -204,8 +219,9 @@ def test_rotates_in_place_toward_a_carrot_far_off_the_heading():
     nu_c, _, logs = command_at(pursuit(X_AXIS, lookahead=1.0), 0.0, [0.2, -0.3, math.pi / 2, 0.0, 0.0])
     np.testing.assert_array_equal(nu_c, [0.0, -1.8])
     assert logs["rotating"] == 1.0
-    nu_c, _, _ = command_at(pursuit(X_AXIS, lookahead=1.0, rotate_to_heading=False), 0.0,
-                            [0.2, -0.3, math.pi / 2, 0.0, 0.0])
+    nu_c, _, _ = command_at(
+        pursuit(X_AXIS, lookahead=1.0, rotate_to_heading=False), 0.0, [0.2, -0.3, math.pi / 2, 0.0, 0.0]
+    )
     assert nu_c[0] > 0.0 and nu_c[1] < 0.0
 
 
@@ -251,8 +267,10 @@ def scenario_file(tmp_path, controller_lines: str):
 
 
 def test_switching_keeps_the_keys_the_new_kind_accepts(tmp_path):
-    path = scenario_file(tmp_path, 'kind = "backstepping"\ngains = [2.0, 50.0, 10.0]\nmax_velocity = 1.5\n'
-                                   'kc = [8.0, 9.0]\nstrict = true\n')
+    path = scenario_file(
+        tmp_path,
+        'kind = "backstepping"\ngains = [2.0, 50.0, 10.0]\nmax_velocity = 1.5\nkc = [8.0, 9.0]\nstrict = true\n',
+    )
     switched = ddtrack.load_scenario(path, controller="regulated_pure_pursuit")
     assert switched.controller.max_velocity == 1.5 and switched.controller.kc == (8.0, 9.0)
     kinematic = ddtrack.load_scenario(path, controller="kinematic_backstepping")

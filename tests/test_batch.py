@@ -1,4 +1,5 @@
 """The batch engine and Monte Carlo (`ddtrack mc`): row i of a batch is the single run, on common random numbers."""
+
 from __future__ import annotations
 
 import json
@@ -10,9 +11,9 @@ import sys
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack.mc import load_specs, run_specs, summarise
 from ddtrack.runner import monte_carlo, prepare, row, run_batch
 
@@ -36,8 +37,10 @@ def test_batch_row_equals_the_single_run(kind):
 
 
 def test_common_random_numbers_across_controllers():
-    bs, nn = (ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM, controller=kind)
-              for kind in ("backstepping", "nn_adaptive_backstepping"))
+    bs, nn = (
+        ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM, controller=kind)
+        for kind in ("backstepping", "nn_adaptive_backstepping")
+    )
     (setup_bs, draws_bs) = prepare(bs, seed=9)
     (setup_nn, draws_nn) = prepare(nn, seed=9, identify=False)
     assert setup_bs.plant_params == setup_nn.plant_params  # the same drawn plant
@@ -50,16 +53,24 @@ def test_monte_carlo_metrics_equal_the_single_runs(kind):
     """mc keeps only the series the metrics read; its rows must equal the metrics of full single runs,
     a diverged run included (a divergence bound of 5 cm: seed 1's error peaks above it, 0 and 2 stay below)."""
     extra = ["controller.epochs=2", "controller.identification_duration=5"] if kind != "backstepping" else []
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, *extra,
-                                     "simulation.divergence_error=0.05"], controller=kind)
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml",
+        overrides=[*RANDOM, *extra, "simulation.divergence_error=0.05"],
+        controller=kind,
+    )
     rows = monte_carlo(scenario, [0, 1, 2], chunk_size=3)
     sim = scenario.simulation
     statuses = []
     for seed, mc_row in zip([0, 1, 2], rows, strict=True):
         single = ddtrack.run(scenario, seed=seed)
-        expected = ddtrack.summarize(ddtrack.timeseries(single), status=single.status_name, window=sim.window,
-                                     control_period=sim.control_period, settling_threshold=sim.settling_threshold,
-                                     failure_time=single.failure_time)
+        expected = ddtrack.summarize(
+            ddtrack.timeseries(single),
+            status=single.status_name,
+            window=sim.window,
+            control_period=sim.control_period,
+            settling_threshold=sim.settling_threshold,
+            failure_time=single.failure_time,
+        )
         assert set(expected) <= set(mc_row)
         assert {name: mc_row[name] for name in expected} == expected  # to the bit
         statuses.append(mc_row["status"])
@@ -80,12 +91,15 @@ def test_chunking_does_not_change_the_runs():
 def test_summary_pairs_runs_by_seed():
     nn_only = ["controller.epochs=2", "controller.identification_duration=5"]  # keys backstepping does not have
     specs = load_specs(SCENARIOS / "figure_eight.toml", controllers=["backstepping"], overrides=RANDOM)
-    specs |= load_specs(SCENARIOS / "figure_eight.toml", controllers=["nn_adaptive_backstepping"],
-                        overrides=[*RANDOM, *nn_only])
+    specs |= load_specs(
+        SCENARIOS / "figure_eight.toml", controllers=["nn_adaptive_backstepping"], overrides=[*RANDOM, *nn_only]
+    )
     rows = run_specs(specs, n=3, seed=2, chunk_size=3)
     summary = summarise(rows)
-    paired = [100 * (b["e_tr_mean"] - n["e_tr_mean"]) / b["e_tr_mean"]
-              for b, n in zip(rows["backstepping"], rows["nn_adaptive_backstepping"], strict=True)]
+    paired = [
+        100 * (b["e_tr_mean"] - n["e_tr_mean"]) / b["e_tr_mean"]
+        for b, n in zip(rows["backstepping"], rows["nn_adaptive_backstepping"], strict=True)
+    ]
     gain = summary["improvement"]["nn_adaptive_backstepping"]
     assert gain["mean"] == pytest.approx(np.mean(paired)) and gain["paired_runs"] == 3
     assert gain["ci_low"] < gain["mean"] < gain["ci_high"]
@@ -94,9 +108,21 @@ def test_summary_pairs_runs_by_seed():
 
 def test_mc_command_writes_its_tables(tmp_path, cli):
     out = tmp_path / "mc"
-    code, stdout, stderr = cli("mc", SCENARIOS / "figure_eight.toml", "-n", "4", "--controllers", "backstepping",
-                          "--vary", "mass=uniform:0.2", *[a for s in SHORT for a in ("--set", s)], "--chunk", "3",
-                          "--out", out)
+    code, stdout, stderr = cli(
+        "mc",
+        SCENARIOS / "figure_eight.toml",
+        "-n",
+        "4",
+        "--controllers",
+        "backstepping",
+        "--vary",
+        "mass=uniform:0.2",
+        *[a for s in SHORT for a in ("--set", s)],
+        "--chunk",
+        "3",
+        "--out",
+        out,
+    )
     assert code == 0 and "4 runs per controller" in stdout and "e_tr_mean" in stdout
     assert stderr == ""  # no progress bar when stderr is not a terminal
     table = pq.read_table(out / "runs.parquet")
@@ -107,13 +133,16 @@ def test_mc_command_writes_its_tables(tmp_path, cli):
     assert (out / "runs.csv").read_text().startswith('"controller","seed"')
 
 
-@pytest.mark.parametrize(("args", "field"), [
-    (["--vary", "mass=uniform"], "--vary"),
-    (["--vary", "mas=uniform:0.2"], "randomize.mas"),
-    (["--controllers", "backstepping,backstepping"], "--controllers"),
-    (["--controllers", "nn"], "controller.kind"),
-    (["--seed", str(2**63 - 1)], "--seed"),  # seeds past jax's int64 key: found by the fuzzer
-])
+@pytest.mark.parametrize(
+    ("args", "field"),
+    [
+        (["--vary", "mass=uniform"], "--vary"),
+        (["--vary", "mas=uniform:0.2"], "randomize.mas"),
+        (["--controllers", "backstepping,backstepping"], "--controllers"),
+        (["--controllers", "nn"], "controller.kind"),
+        (["--seed", str(2**63 - 1)], "--seed"),  # seeds past jax's int64 key: found by the fuzzer
+    ],
+)
 def test_mc_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", *args, "--out", tmp_path / "mc")
     assert code == 2 and stderr.startswith(f"error: {field}")
@@ -123,10 +152,27 @@ def test_mc_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
 def test_mc_shows_a_progress_bar_on_a_terminal(tmp_path):
     """On a (pseudo-)terminal stderr, ``mc`` draws rich's bar from 0 to the last run."""
     leader, follower = pty.openpty()
-    args = [sys.executable, "-m", "ddtrack", "mc", str(SCENARIOS / "figure_eight.toml"), "-n", "4", "--chunk", "2",
-            *[a for s in SHORT for a in ("--set", s)], "--out", str(tmp_path / "mc")]
-    with subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=follower,
-                          env={**os.environ, "COLUMNS": "100", "TERM": "xterm"}) as process:
+    args = [
+        sys.executable,
+        "-m",
+        "ddtrack",
+        "mc",
+        str(SCENARIOS / "figure_eight.toml"),
+        "-n",
+        "4",
+        "--chunk",
+        "2",
+        *[a for s in SHORT for a in ("--set", s)],
+        "--out",
+        str(tmp_path / "mc"),
+    ]
+    with subprocess.Popen(
+        args,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=follower,
+        env={**os.environ, "COLUMNS": "100", "TERM": "xterm"},
+    ) as process:
         os.close(follower)
         screen = b""
         while True:
@@ -159,8 +205,9 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     sharded, pair = (json.loads(line) for line in done.stdout.splitlines()[-2:])
-    here = monte_carlo(ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM), [0, 1, 2, 3],
-                       chunk_size=4)
+    here = monte_carlo(
+        ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM), [0, 1, 2, 3], chunk_size=4
+    )
     assert pair == here[:2]
     for a, b in zip(here, sharded, strict=True):
         assert a == b  # every metric, to the bit: each device simulates its two runs as a batch of two
@@ -168,8 +215,19 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
 
 def test_mc_of_one_run_prints_its_mean_without_an_interval(tmp_path, cli):
     # found by the fuzzer: one run has no confidence interval, and the summary line used to crash on it
-    code, stdout, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "1", "--controllers", "backstepping",
-                               "--set", "simulation.duration=2", "--set", "simulation.metric_window=[0, 2]",
-                               "--out", tmp_path / "mc")
+    code, stdout, stderr = cli(
+        "mc",
+        SCENARIOS / "paper_line.toml",
+        "-n",
+        "1",
+        "--controllers",
+        "backstepping",
+        "--set",
+        "simulation.duration=2",
+        "--set",
+        "simulation.metric_window=[0, 2]",
+        "--out",
+        tmp_path / "mc",
+    )
     assert code == 0, stderr
     assert "(one run: no interval)" in stdout and (tmp_path / "mc" / "summary.json").is_file()

@@ -1,5 +1,6 @@
 """bench/control_loop.py: python-control's simulation of the paper line case is the same closed loop as
 ddtrack's, at least as accurate (skipped without python-control: pip install -e '.[bench]')."""
+
 from __future__ import annotations
 
 import sys
@@ -11,8 +12,8 @@ import pytest
 pytest.importorskip("control")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
-import control_loop  # noqa: E402
-from python_loop import params_from_scenario  # noqa: E402
+import control_loop
+from python_loop import params_from_scenario
 
 
 def test_python_control_loop_matches_ddtrack_over_the_transient():

@@ -1,4 +1,5 @@
 """The CLI and the run folder (DESIGN 4): files, columns, keys, exit codes, atomic writes."""
+
 from __future__ import annotations
 
 import json
@@ -9,16 +10,44 @@ import tomllib
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-
 from conftest import SCENARIOS
+
 from ddtrack import load_scenario
 from ddtrack.errors import RunError
 from ddtrack.rundir import atomic_write
 
-COLUMNS = ["t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref", "e_x", "e_y",
-           "e_theta", "e_tr", "v_cmd", "omega_cmd", "tau_r", "tau_l"]
-METRIC_KEYS = {"status", "window", "e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort",
-               "saturation_fraction"}
+COLUMNS = [
+    "t",
+    "x",
+    "y",
+    "theta",
+    "v",
+    "omega",
+    "x_ref",
+    "y_ref",
+    "theta_ref",
+    "v_ref",
+    "omega_ref",
+    "e_x",
+    "e_y",
+    "e_theta",
+    "e_tr",
+    "v_cmd",
+    "omega_cmd",
+    "tau_r",
+    "tau_l",
+]
+METRIC_KEYS = {
+    "status",
+    "window",
+    "e_tr_mean",
+    "e_tr_rms",
+    "e_tr_max",
+    "e_tr_final",
+    "settling_time",
+    "effort",
+    "saturation_fraction",
+}
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +63,13 @@ def paper_line_run(tmp_path_factory):
 def test_run_writes_the_documented_folder(paper_line_run):
     code, out = paper_line_run
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["ddtrack.json", "figures", "metrics.json", "scenario.toml",
-                                                     "timeseries.parquet"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "ddtrack.json",
+        "figures",
+        "metrics.json",
+        "scenario.toml",
+        "timeseries.parquet",
+    ]
     figures = sorted(p.name for p in (out / "figures").iterdir())
     assert figures == ["errors.png", "path.png", "states.png", "torques.png"]
     for png in (out / "figures").iterdir():
@@ -62,7 +96,13 @@ def test_timeseries_columns_and_types(paper_line_run):
 def test_metrics_json(paper_line_run):
     _, out = paper_line_run
     metrics = json.loads((out / "metrics.json").read_text())
-    assert METRIC_KEYS | {"final_gains", "warnings", "mu_required_max", "time_above_floor_mu", "wheel_speed_max"} == set(metrics)
+    assert METRIC_KEYS | {
+        "final_gains",
+        "warnings",
+        "mu_required_max",
+        "time_above_floor_mu",
+        "wheel_speed_max",
+    } == set(metrics)
     assert metrics["status"] == "ok" and metrics["window"] == [20.0, 40.0]
     assert metrics["final_gains"] == [1.0, 55.0, 15.0]
     # SPEC 4.5: under the paper's mismatch, backstepping's steady error is of the order F0/(m k_cv Kx) = 0.046 m
@@ -87,8 +127,9 @@ def test_resolved_scenario_reproduces_the_run(paper_line_run, tmp_path, cli):
 
 def test_diverged_run_exits_1_with_series_up_to_failure(tmp_path, cli):
     out = tmp_path / "out"
-    code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--set", "simulation.divergence_error=8",
-                          "--out", out)  # the run starts 10 m from the reference
+    code, _, stderr = cli(
+        "run", SCENARIOS / "paper_line.toml", "--set", "simulation.divergence_error=8", "--out", out
+    )  # the run starts 10 m from the reference
     assert code == 1
     assert "diverged at t = 0.00 s" in stderr and "lower the gains" in stderr
     metrics = json.loads((out / "metrics.json").read_text())
@@ -97,8 +138,18 @@ def test_diverged_run_exits_1_with_series_up_to_failure(tmp_path, cli):
 
 
 def test_seed_and_set_reach_the_run(tmp_path, cli):
-    code, stdout, _ = cli("run", SCENARIOS / "waypoints.toml", "--seed", "3", "--set", "simulation.duration=5",
-                          "--controller", "backstepping", "--out", tmp_path / "o")
+    code, stdout, _ = cli(
+        "run",
+        SCENARIOS / "waypoints.toml",
+        "--seed",
+        "3",
+        "--set",
+        "simulation.duration=5",
+        "--controller",
+        "backstepping",
+        "--out",
+        tmp_path / "o",
+    )
     assert code == 0 and "seed 3" in stdout
     resolved = tomllib.loads((tmp_path / "o" / "scenario.toml").read_text())
     assert resolved["simulation"]["seed"] == 3 and resolved["simulation"]["duration"] == 5.0
@@ -117,8 +168,21 @@ def test_validate_and_list(cli):
     assert code == 0 and stdout.startswith("ok: paper_square") and "8000 control periods" in stdout
     code, stdout, _ = cli("list")
     assert code == 0
-    for name in ("controllers:", "backstepping", "trajectories:", "line", "square", "circle", "figure_eight",
-                 "sinusoid", "waypoints", "disturbances:", "none", "constant", "gaussian"):
+    for name in (
+        "controllers:",
+        "backstepping",
+        "trajectories:",
+        "line",
+        "square",
+        "circle",
+        "figure_eight",
+        "sinusoid",
+        "waypoints",
+        "disturbances:",
+        "none",
+        "constant",
+        "gaussian",
+    ):
         assert name in stdout
     code, stdout, _ = cli("list", "disturbances")
     assert code == 0 and "line" not in stdout and "gaussian" in stdout
@@ -147,8 +211,16 @@ def test_atomic_write_leaves_no_partial_file(tmp_path):
 
 def test_adaptive_run_writes_gains_and_identification(tmp_path, cli):
     out = tmp_path / "nn"
-    code, stdout, _ = cli("run", SCENARIOS / "paper_line.toml", "--controller", "nn_adaptive_backstepping",
-                          "--set", "controller.epochs=5", "--out", out)
+    code, stdout, _ = cli(
+        "run",
+        SCENARIOS / "paper_line.toml",
+        "--controller",
+        "nn_adaptive_backstepping",
+        "--set",
+        "controller.epochs=5",
+        "--out",
+        out,
+    )
     assert code == 0 and "nn_adaptive_backstepping" in stdout
     assert (out / "figures" / "gains.png").stat().st_size > 10_000  # gains that moved get their figure
     found = json.loads((out / "identification.json").read_text())
@@ -169,11 +241,11 @@ def test_reproduce_writes_table1_and_figures(tmp_path, cli):
     assert "| Case 1: line y = x | backstepping |" in stdout and "60.51" in stdout
     table = json.loads((out / "table1.json").read_text())
     assert table["seeds"] == 2 and set(table["cases"]) == {"paper_line", "paper_square"}
-    for name, entry in table["cases"].items():
+    for _name, entry in table["cases"].items():
         bs, nn = entry["controllers"]["backstepping"], entry["controllers"]["nn_adaptive"]
         assert len(nn["e_tr_mean"]["values"]) == 2 and nn["e_tr_mean"]["ci_low"] <= nn["e_tr_mean"]["mean"]
         # the paired improvement is computed from the per-seed values
-        paired = [100 * (b - n) / b for b, n in zip(bs["e_tr_mean"]["values"], nn["e_tr_mean"]["values"])]
+        paired = [100 * (b - n) / b for b, n in zip(bs["e_tr_mean"]["values"], nn["e_tr_mean"]["values"], strict=True)]
         assert entry["improvement"]["nn_adaptive"]["values"] == pytest.approx(paired)
         assert entry["improvement"]["nn_adaptive"]["mean"] > 0  # it beats backstepping, as measured
         assert entry["paper"]["backstepping"] in (0.0547, 0.0976)
@@ -187,10 +259,14 @@ def test_reproduce_writes_table1_and_figures(tmp_path, cli):
 def test_reproduce_exits_1_when_the_adaptive_controller_loses(tmp_path, cli, monkeypatch):
     import ddtrack.reproduce as reproduce_module
 
-    losing = {"seeds": 1, "elapsed_s": 0.0, "cases": {
-        "paper_line": {"improvement": {"nn_adaptive": {"mean": -3.0, "missing": 0}}},
-        "paper_square": {"improvement": {"nn_adaptive": {"mean": 12.0, "missing": 0}}},
-    }}
+    losing = {
+        "seeds": 1,
+        "elapsed_s": 0.0,
+        "cases": {
+            "paper_line": {"improvement": {"nn_adaptive": {"mean": -3.0, "missing": 0}}},
+            "paper_square": {"improvement": {"nn_adaptive": {"mean": 12.0, "missing": 0}}},
+        },
+    }
     monkeypatch.setattr(reproduce_module, "reproduce", lambda out, **_: losing)
     monkeypatch.setattr(reproduce_module, "table_markdown", lambda table: "table")
     code, _, stderr = cli("reproduce", "--out", tmp_path / "r")
@@ -211,14 +287,31 @@ def test_an_overlaid_path_keeps_the_title(paper_line_run):
 
 def test_a_burger_scale_run_prints_its_small_effort_with_significant_digits(tmp_path, cli):
     """A 1 kg robot with 0.5 N m wheels: the effort is ~1e-3 N^2 m^2 s, which fixed decimals printed as 0.0."""
-    burger = ["robot.mass=1.0", "robot.inertia=0.01", "robot.com_offset=0.0", "robot.wheel_radius=0.033",
-              "robot.half_axle=0.08", "robot.max_torque=0.5", "plant.mass=1.2", "plant.inertia=0.012",
-              "plant.com_offset=0.01", "plant.viscous_friction=0.0005", "plant.coulomb_friction=0.002",
-              "disturbance.bias=[0.0003, 0.0]", "disturbance.amplitude=[0.0005, -0.0005]", "trajectory.speed=0.2",
-              "initial.pose=[0.0, 0.05, 0.785]", "simulation.duration=4", "simulation.metric_window=[2.0, 4.0]",
-              "controller.max_velocity=0.22", "controller.max_yaw_rate=2.8"]
+    burger = [
+        "robot.mass=1.0",
+        "robot.inertia=0.01",
+        "robot.com_offset=0.0",
+        "robot.wheel_radius=0.033",
+        "robot.half_axle=0.08",
+        "robot.max_torque=0.5",
+        "plant.mass=1.2",
+        "plant.inertia=0.012",
+        "plant.com_offset=0.01",
+        "plant.viscous_friction=0.0005",
+        "plant.coulomb_friction=0.002",
+        "disturbance.bias=[0.0003, 0.0]",
+        "disturbance.amplitude=[0.0005, -0.0005]",
+        "trajectory.speed=0.2",
+        "initial.pose=[0.0, 0.05, 0.785]",
+        "simulation.duration=4",
+        "simulation.metric_window=[2.0, 4.0]",
+        "controller.max_velocity=0.22",
+        "controller.max_yaw_rate=2.8",
+    ]
     out = tmp_path / "burger"
-    code, stdout, _ = cli("run", SCENARIOS / "paper_line.toml", *(a for s in burger for a in ("--set", s)), "--out", out)
+    code, stdout, _ = cli(
+        "run", SCENARIOS / "paper_line.toml", *(a for s in burger for a in ("--set", s)), "--out", out
+    )
     assert code == 0
     effort = json.loads((out / "metrics.json").read_text())["effort"]
     assert 0.0 < effort < 0.01  # the scale that fixed decimals lost

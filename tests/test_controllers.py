@@ -4,6 +4,7 @@ saturations and failure statuses.
 Simulator structures are shared between tests (same pytree structure and n_steps) so that each
 compiles once; tests vary only leaves (gains, parameters, poses, control period).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -37,8 +38,9 @@ N = 2000  # control periods of the shared simulator structures (20 s at T_c = 10
 TC = 0.01
 EXACT = RobotParams(max_torque=1e9)  # nominal robot, no friction, saturation off
 # the "true" plant of SPEC 1.4 (mismatch + friction), saturation off
-MISMATCHED = RobotParams(mass=12.0, inertia=0.70, com_offset=0.08, viscous_friction=0.005,
-                         coulomb_friction=0.05, max_torque=1e9)
+MISMATCHED = RobotParams(
+    mass=12.0, inertia=0.70, com_offset=0.08, viscous_friction=0.005, coulomb_friction=0.05, max_torque=1e9
+)
 PAPER_DIST = WheelDisturbance(bias=(0.03, 0.0), amplitude=(0.05, -0.05), frequency=0.5, phase=(0.0, 0.0))
 
 
@@ -51,10 +53,28 @@ def cascade(nominal: RobotParams = EXACT, kc=(10.0, 10.0), **kw) -> Cascade:
     return Cascade(backstepping(**kw), ComputedTorque(nominal, kc=kc))
 
 
-def run(plant: RobotParams, controller, trajectory, x0, *, n=N, control_period=TC, substeps=10,
-        disturbance=WheelDisturbance(bias=(0.0, 0.0), amplitude=(0.0, 0.0), frequency=0.0, phase=(0.0, 0.0))):
-    return simulate(DynamicPlant(plant), controller, trajectory, jnp.asarray(x0, dtype=float), Draws.zeros(n),
-                    n_steps=n, control_period=control_period, substeps=substeps, disturbance=disturbance)
+def run(
+    plant: RobotParams,
+    controller,
+    trajectory,
+    x0,
+    *,
+    n=N,
+    control_period=TC,
+    substeps=10,
+    disturbance=WheelDisturbance(bias=(0.0, 0.0), amplitude=(0.0, 0.0), frequency=0.0, phase=(0.0, 0.0)),
+):
+    return simulate(
+        DynamicPlant(plant),
+        controller,
+        trajectory,
+        jnp.asarray(x0, dtype=float),
+        Draws.zeros(n),
+        n_steps=n,
+        control_period=control_period,
+        substeps=substeps,
+        disturbance=disturbance,
+    )
 
 
 def on_reference(trajectory, moving: bool = True, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -69,9 +89,20 @@ def commands(result) -> np.ndarray:
 
 
 def random_reference(rng) -> Reference:
-    return Reference(*(jnp.asarray(v) for v in (rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-np.pi, np.pi),
-                                                 rng.uniform(0.0, 2.0), rng.uniform(-2, 2), rng.uniform(-1, 1),
-                                                 rng.uniform(-1, 1))))
+    return Reference(
+        *(
+            jnp.asarray(v)
+            for v in (
+                rng.uniform(-5, 5),
+                rng.uniform(-5, 5),
+                rng.uniform(-np.pi, np.pi),
+                rng.uniform(0.0, 2.0),
+                rng.uniform(-2, 2),
+                rng.uniform(-1, 1),
+                rng.uniform(-1, 1),
+            )
+        )
+    )
 
 
 # --- item 6 -----------------------------------------------------------------------------------------
@@ -95,10 +126,14 @@ def test_zero_error_gives_feedforward():
 # --- item 7 -----------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("trajectory", [
-    Line(start=(1.0, -2.0), heading=0.7, speed=0.5),
-    Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
-], ids=["line", "circle"])
+@pytest.mark.parametrize(
+    "trajectory",
+    [
+        Line(start=(1.0, -2.0), heading=0.7, speed=0.5),
+        Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
+    ],
+    ids=["line", "circle"],
+)
 def test_exact_tracking_from_the_reference(trajectory):
     result = run(EXACT, cascade(), trajectory, on_reference(trajectory))
     assert result.status_name == "ok"
@@ -122,12 +157,20 @@ def test_starting_at_rest_lags():
 def test_computed_torque_is_exact_with_the_exact_model():
     rng = np.random.default_rng(8)
     for _ in range(100):
-        params = RobotParams(mass=rng.uniform(1, 50), inertia=rng.uniform(0.05, 5), com_offset=rng.uniform(-0.3, 0.3),
-                             wheel_radius=rng.uniform(0.02, 0.3), half_axle=rng.uniform(0.1, 1.0),
-                             viscous_friction=rng.uniform(0, 0.05), coulomb_friction=rng.uniform(0, 0.5),
-                             friction_smoothing=rng.uniform(0.005, 0.1), max_torque=1e9)
-        y = jnp.asarray(np.r_[rng.uniform(-10, 10, 2), rng.uniform(-np.pi, np.pi), rng.uniform(-2, 2),
-                              rng.uniform(-4, 4)])
+        params = RobotParams(
+            mass=rng.uniform(1, 50),
+            inertia=rng.uniform(0.05, 5),
+            com_offset=rng.uniform(-0.3, 0.3),
+            wheel_radius=rng.uniform(0.02, 0.3),
+            half_axle=rng.uniform(0.1, 1.0),
+            viscous_friction=rng.uniform(0, 0.05),
+            coulomb_friction=rng.uniform(0, 0.5),
+            friction_smoothing=rng.uniform(0.005, 0.1),
+            max_torque=1e9,
+        )
+        y = jnp.asarray(
+            np.r_[rng.uniform(-10, 10, 2), rng.uniform(-np.pi, np.pi), rng.uniform(-2, 2), rng.uniform(-4, 4)]
+        )
         nu_c, nu_c_dot = jnp.asarray(rng.uniform(-2, 2, 2)), jnp.asarray(rng.uniform(-5, 5, 2))
         kc = rng.uniform(1, 20, 2)
         command = VelocityCommand(nu_c, nu_c_dot, jnp.zeros(2), jnp.asarray(0.0))
@@ -178,26 +221,37 @@ def _kinematic_closed_loop(trajectory, gains):
     return field, value, predicted_rate, autodiff_rate
 
 
-@pytest.mark.parametrize("trajectory", [
-    Line(start=(0.5, -1.0), heading=-2.0, speed=0.7),
-    Circle(center=(0.0, 1.0), radius=1.5, speed=0.4, start_angle=2.0, clockwise=True),
-], ids=["line", "circle"])
+@pytest.mark.parametrize(
+    "trajectory",
+    [
+        Line(start=(0.5, -1.0), heading=-2.0, speed=0.7),
+        Circle(center=(0.0, 1.0), radius=1.5, speed=0.4, start_angle=2.0, clockwise=True),
+    ],
+    ids=["line", "circle"],
+)
 def test_lyapunov_decreases_along_the_kinematic_closed_loop(trajectory):
     rng = np.random.default_rng(9)
     n_cases, n_steps, h = 12, 4000, 1e-3  # 4 s at 1 ms
     gains = jnp.asarray([1.3, 40.0, 9.0])
     field, value, predicted_rate, autodiff_rate = _kinematic_closed_loop(trajectory, gains)
     ref0 = trajectory(0.0)
-    z0 = np.stack([
-        np.r_[float(ref0.x) + rng.uniform(-1, 1), float(ref0.y) + rng.uniform(-1, 1),
-              float(ref0.theta) + rng.uniform(-0.98, 0.98) * np.pi, 0.0]
-        for _ in range(n_cases)
-    ])
+    z0 = np.stack(
+        [
+            np.r_[
+                float(ref0.x) + rng.uniform(-1, 1),
+                float(ref0.y) + rng.uniform(-1, 1),
+                float(ref0.theta) + rng.uniform(-0.98, 0.98) * np.pi,
+                0.0,
+            ]
+            for _ in range(n_cases)
+        ]
+    )
 
     @jax.jit
     def integrate(z0):
         def one(z, _):
             return rk4_step(field, z, h), (value(z), predicted_rate(z), autodiff_rate(z))
+
         return jax.lax.scan(one, z0, None, length=n_steps)[1]
 
     v, predicted, autodiff = (np.asarray(a) for a in jax.vmap(integrate)(jnp.asarray(z0)))
@@ -222,11 +276,14 @@ def _v2(result, ky):
     return 0.5 * (e[:, 0] ** 2 + e[:, 1] ** 2) + (1.0 - np.cos(e[:, 2])) / ky + 0.5 * np.sum(e_c**2, axis=1)
 
 
-@pytest.mark.parametrize("kc, offset, contrast", [
-    (10.0, (-0.3, 0.2, 0.5), False),
-    (0.05, (-0.3, 0.2, 0.5), False),
-    (0.05, (0.0, 0.0, 0.0), True),  # at rest on the reference: e_4 < 0 while e_x > 0 grows
-])
+@pytest.mark.parametrize(
+    "kc, offset, contrast",
+    [
+        (10.0, (-0.3, 0.2, 0.5), False),
+        (0.05, (-0.3, 0.2, 0.5), False),
+        (0.05, (0.0, 0.0, 0.0), True),  # at rest on the reference: e_4 < 0 while e_x > 0 grows
+    ],
+)
 def test_strict_backstepping_v2_non_increasing(kc, offset, contrast):
     """SPEC 2.4/6.10. Tolerance: the torque is held over T_c, so within a period u differs from the
     continuous law by O((t - t_k) |du/dt|); integrated, V_2 may rise by O(T_c^2 |e_c| |du/dt|) per period,
@@ -254,14 +311,20 @@ def test_analytic_command_rate_matches_central_difference():
     trajectory = FigureEight(center=(0.5, -0.2), size=3.0, period=30.0)
     bs = backstepping()
     tc = 1e-3
-    result = run(EXACT, Cascade(bs, ComputedTorque(EXACT)), trajectory,
-                 on_reference(trajectory, moving=False, offset=(-0.1, 0.1, 0.2)), control_period=tc)
+    result = run(
+        EXACT,
+        Cascade(bs, ComputedTorque(EXACT)),
+        trajectory,
+        on_reference(trajectory, moving=False, offset=(-0.1, 0.1, 0.2)),
+        control_period=tc,
+    )
     assert result.status_name == "ok"
     t, nu_c = np.asarray(result.t), commands(result)
 
     def rate(state, ref):
-        return kanayama_command_rate(posture_error(state[0], state[1], state[2], ref.x, ref.y, ref.theta),
-                                     state[3:5], ref, bs.gains)
+        return kanayama_command_rate(
+            posture_error(state[0], state[1], state[2], ref.x, ref.y, ref.theta), state[3:5], ref, bs.gains
+        )
 
     analytic = np.asarray(jax.vmap(rate)(result.state, result.reference))
     third = np.zeros_like(analytic)  # nu_c''' ~ second difference of the analytic rate
@@ -269,7 +332,7 @@ def test_analytic_command_rate_matches_central_difference():
     errors = {}
     for j in (10, 5):
         h = j * tc
-        central = (nu_c[2 * j:] - nu_c[:-2 * j]) / (2 * h)
+        central = (nu_c[2 * j :] - nu_c[: -2 * j]) / (2 * h)
         window = (t[j:-j] >= 0.2) & (t[j:-j] <= 1.8)
         error = (central - analytic[j:-j])[window]
         errors[j] = np.max(np.abs(error), axis=0)
@@ -294,8 +357,9 @@ def test_line_steady_state_under_constant_drag(tau_d):
     trajectory = Line(start=(0.2, 0.1), heading=0.9, speed=0.5)
     kx, ky, kc = 1.0, 55.0, 10.0
     dist = WheelDisturbance(bias=tau_d, amplitude=(0.0, 0.0), frequency=0.0, phase=(0.0, 0.0))
-    result = run(EXACT, cascade(kx=kx, ky=ky, ktheta=15.0, kc=(kc, kc)), trajectory, on_reference(trajectory),
-                 disturbance=dist)
+    result = run(
+        EXACT, cascade(kx=kx, ky=ky, ktheta=15.0, kc=(kc, kc)), trajectory, on_reference(trajectory), disturbance=dist
+    )
     e = np.asarray(result.error[-1])
     e_x, e_y = f0 / (EXACT.mass * kc * kx), t0 / (EXACT.inertia_axle * kc * 0.5 * ky)
     np.testing.assert_allclose(e[0], e_x, rtol=0.02)  # SPEC 6.12: 2 %
@@ -320,10 +384,14 @@ def _rigid(trajectory, phi, shift):
     return dataclasses.replace(trajectory, center=tuple(center), start_angle=trajectory.start_angle + phi)
 
 
-@pytest.mark.parametrize("trajectory", [
-    Line(start=(0.3, -0.4), heading=0.6, speed=0.5),
-    Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
-], ids=["line", "circle"])
+@pytest.mark.parametrize(
+    "trajectory",
+    [
+        Line(start=(0.3, -0.4), heading=0.6, speed=0.5),
+        Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
+    ],
+    ids=["line", "circle"],
+)
 def test_rigid_motion_invariance(trajectory):
     # mismatched plant, friction, asymmetric disturbance and the paper's clamps: all act in the body frame
     controller = Cascade(Backstepping(), ComputedTorque(RobotParams()))
@@ -342,23 +410,32 @@ def test_rigid_motion_invariance(trajectory):
         np.testing.assert_allclose(np.asarray(moved.control), np.asarray(base.control), rtol=0, atol=1e-8)
 
 
-@pytest.mark.parametrize("trajectory", [
-    Line(start=(0.3, -0.4), heading=0.6, speed=0.5),
-    Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
-], ids=["line", "circle"])
+@pytest.mark.parametrize(
+    "trajectory",
+    [
+        Line(start=(0.3, -0.4), heading=0.6, speed=0.5),
+        Circle(center=(1.0, 2.0), radius=2.0, speed=0.5, start_angle=0.3),
+    ],
+    ids=["line", "circle"],
+)
 def test_mirror_symmetry(trajectory):
     controller = Cascade(Backstepping(), ComputedTorque(RobotParams()))
     pose0 = np.array([-0.5, 1.2, 2.5])
     if isinstance(trajectory, Line):
-        mirrored = Line(start=(trajectory.start[0], -trajectory.start[1]), heading=-trajectory.heading,
-                        speed=trajectory.speed)
+        mirrored = Line(
+            start=(trajectory.start[0], -trajectory.start[1]), heading=-trajectory.heading, speed=trajectory.speed
+        )
     else:
-        mirrored = Circle(center=(trajectory.center[0], -trajectory.center[1]), radius=trajectory.radius,
-                          speed=trajectory.speed, start_angle=-trajectory.start_angle, clockwise=True)
+        mirrored = Circle(
+            center=(trajectory.center[0], -trajectory.center[1]),
+            radius=trajectory.radius,
+            speed=trajectory.speed,
+            start_angle=-trajectory.start_angle,
+            clockwise=True,
+        )
     swapped = WheelDisturbance(bias=(0.0, 0.03), amplitude=(-0.05, 0.05), frequency=0.5, phase=(0.0, 0.0))
     base = run(MISMATCHED, controller, trajectory, np.r_[pose0, 0.0, 0.0], disturbance=PAPER_DIST)
-    mirror = run(MISMATCHED, controller, mirrored, np.r_[pose0[0], -pose0[1], -pose0[2], 0.0, 0.0],
-                 disturbance=swapped)
+    mirror = run(MISMATCHED, controller, mirrored, np.r_[pose0[0], -pose0[1], -pose0[2], 0.0, 0.0], disturbance=swapped)
     e0, e1 = np.asarray(base.error), np.asarray(mirror.error)
     np.testing.assert_allclose(e1[:, 0], e0[:, 0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(e1[:, 1], -e0[:, 1], rtol=0, atol=1e-9)
@@ -366,8 +443,9 @@ def test_mirror_symmetry(trajectory):
     np.testing.assert_allclose(np.hypot(e1[:, 0], e1[:, 1]), np.hypot(e0[:, 0], e0[:, 1]), rtol=0, atol=1e-9)
     # not vacuous: the disturbance's asymmetry shows (e_y is not identically 0) and swapping matters
     assert np.max(np.abs(e0[:, 1])) > 1e-2
-    unswapped = run(MISMATCHED, controller, mirrored, np.r_[pose0[0], -pose0[1], -pose0[2], 0.0, 0.0],
-                    disturbance=PAPER_DIST)
+    unswapped = run(
+        MISMATCHED, controller, mirrored, np.r_[pose0[0], -pose0[1], -pose0[2], 0.0, 0.0], disturbance=PAPER_DIST
+    )
     assert np.max(np.abs(np.asarray(unswapped.error[:, 1]) + e0[:, 1])) > 1e-5
 
 
@@ -414,9 +492,18 @@ def test_clamps_and_saturated_log(max_torque):
     plant = dataclasses.replace(setup.plant_params, max_torque=max_torque)
     controller = Cascade(setup.controller.outer, ComputedTorque(nominal, kc=setup.controller.inner.kc))
     n = scenario.simulation.n_steps
-    result = simulate(DynamicPlant(plant), controller, setup.trajectory, setup.x0, draws, n_steps=n,
-                      control_period=scenario.simulation.control_period, substeps=scenario.simulation.substeps,
-                      disturbance=setup.disturbance, noise=setup.noise)
+    result = simulate(
+        DynamicPlant(plant),
+        controller,
+        setup.trajectory,
+        setup.x0,
+        draws,
+        n_steps=n,
+        control_period=scenario.simulation.control_period,
+        substeps=scenario.simulation.substeps,
+        disturbance=setup.disturbance,
+        noise=setup.noise,
+    )
     assert result.status_name == "ok"
     cols = ddtrack.timeseries(result)
     tau = np.stack([cols["tau_r"], cols["tau_l"]], axis=1)
@@ -461,10 +548,14 @@ def _assert_frozen(result):
 LINE = Line(start=(0.2, 0.1), heading=0.9, speed=0.5)
 
 
-@pytest.mark.parametrize("kw", [
-    {"kx": 1e4, "ky": 1e7, "ktheta": 1e4},  # absurd outer gains (clamps off)
-    {"kc": (1e5, 1e5)},  # inner loop unstable under the ZOH (k_c T_c >> 2)
-], ids=["outer", "inner"])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"kx": 1e4, "ky": 1e7, "ktheta": 1e4},  # absurd outer gains (clamps off)
+        {"kc": (1e5, 1e5)},  # inner loop unstable under the ZOH (k_c T_c >> 2)
+    ],
+    ids=["outer", "inner"],
+)
 def test_absurd_gains_fail_as_status(kw):
     result = run(EXACT, cascade(**kw), LINE, on_reference(LINE, moving=False, offset=(0.0, 0.5, 0.3)))
     assert result.status_name in ("diverged", "non_finite")
@@ -473,8 +564,7 @@ def test_absurd_gains_fail_as_status(kw):
 
 
 def test_huge_control_period_fails_as_status():
-    result = run(EXACT, cascade(), LINE, on_reference(LINE, moving=False, offset=(0.0, 0.5, 0.3)),
-                 control_period=2.0)
+    result = run(EXACT, cascade(), LINE, on_reference(LINE, moving=False, offset=(0.0, 0.5, 0.3)), control_period=2.0)
     assert result.status_name in ("diverged", "non_finite")
     k = int(result.failure_index)
     assert result.failure_time == pytest.approx(2.0 * k)
@@ -509,4 +599,4 @@ def test_nan_controller_is_non_finite_at_its_first_nan(start_step):
     # the controller's memory is frozen too: the call counter stops at the failing step
     calls = np.asarray(result.logs["calls"])
     np.testing.assert_array_equal(calls[: start_step + 1], np.arange(start_step + 1))
-    assert np.all(calls[start_step + 1:] == start_step)
+    assert np.all(calls[start_step + 1 :] == start_step)

@@ -6,6 +6,7 @@ Related checks elsewhere: tests/test_package.py::test_same_seed_same_bits_other_
 control of two runs), tests/test_cli.py::test_resolved_scenario_reproduces_the_run (two ``ddtrack run`` folders,
 parquet and metrics.json equal), tests/test_batch.py (batch rows and Monte Carlo rows vs single runs).
 """
+
 from __future__ import annotations
 
 import json
@@ -20,24 +21,32 @@ import jax
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack._ordered import total
 from ddtrack.runner import monte_carlo, row, run_batch
 from ddtrack.scenario import CONTROLLERS
 
 # Gaussian wheel disturbance, pose noise and a random plant mass: every random stream is drawn
-RANDOM = ["simulation.duration=3", "simulation.metric_window=[0, 3]",
-          'randomize.mass={distribution="uniform", relative=0.2}']
+RANDOM = [
+    "simulation.duration=3",
+    "simulation.metric_window=[0, 3]",
+    'randomize.mass={distribution="uniform", relative=0.2}',
+]
 NN_SHORT = ["controller.epochs=1", "controller.identification_duration=1"]
 
 
 def metrics_of(scenario, result) -> dict:
     sim = scenario.simulation
-    return ddtrack.summarize(ddtrack.timeseries(result), status=result.status_name, window=sim.window,
-                             control_period=sim.control_period, settling_threshold=sim.settling_threshold,
-                             failure_time=result.failure_time)
+    return ddtrack.summarize(
+        ddtrack.timeseries(result),
+        status=result.status_name,
+        window=sim.window,
+        control_period=sim.control_period,
+        settling_threshold=sim.settling_threshold,
+        failure_time=result.failure_time,
+    )
 
 
 def run_metrics_of(scenario, seed: int) -> dict:
@@ -76,8 +85,9 @@ def test_repeated_runs_are_bit_identical(kind):
 
 def test_a_failed_run_is_bit_identical_too():
     """A diverged run: the same failing period and the same truncated series."""
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml",
-                                     overrides=[*RANDOM, "simulation.divergence_error=0.05"])
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, "simulation.divergence_error=0.05"]
+    )
     first, again = ddtrack.run(scenario, seed=1), ddtrack.run(scenario, seed=1)
     assert first.status_name == "diverged" and int(first.failure_index) == int(again.failure_index) > 0
     assert_same_bits(ddtrack.timeseries(first), ddtrack.timeseries(again))
@@ -91,8 +101,7 @@ FMA_SENSITIVE = {"kinematic_backstepping"}
 
 def batch_and_single(kind: str, seeds: list[int], *extra: str):
     nn = NN_SHORT if kind == "nn_adaptive_backstepping" else []
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, *nn, *extra],
-                                     controller=kind)
+    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*RANDOM, *nn, *extra], controller=kind)
     return scenario, run_batch(scenario, seeds)
 
 
@@ -117,8 +126,9 @@ def test_monte_carlo_rows_are_the_single_runs_metrics_bit_for_bit(kind):
     """``ddtrack mc`` keeps only the series its metrics read, in chunks padded to one shape: each row's metrics
     equal those of the single run exactly, for chunks of 2 and of 64, a diverged run (a 5 cm bound) included."""
     nn = NN_SHORT if kind == "nn_adaptive_backstepping" else []
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", controller=kind,
-                                     overrides=[*RANDOM, *nn, "simulation.divergence_error=0.05"])
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml", controller=kind, overrides=[*RANDOM, *nn, "simulation.divergence_error=0.05"]
+    )
     seeds = [0, 1, 2]
     singles = [run_metrics_of(scenario, seed) for seed in seeds]
     assert {m["status"] for m in singles} == {"ok", "diverged"}
@@ -162,9 +172,11 @@ def test_sweep_results_do_not_depend_on_the_worker_count(tmp_path, cli):
     configuration (a 5 cm divergence bound on one mass) is included."""
     shutil.copy(SCENARIOS / "figure_eight.toml", tmp_path / "figure_eight.toml")
     path = tmp_path / "sweep.toml"
-    path.write_text('scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = 3\nchunk = 2\n'
-                    '[set]\n"simulation.duration" = 2.0\n"simulation.metric_window" = [0.0, 2.0]\n'
-                    '[grid]\n"robot.mass" = [9.0, 11.0]\n"simulation.divergence_error" = [50.0, 0.05]\n')
+    path.write_text(
+        'scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = 3\nchunk = 2\n'
+        '[set]\n"simulation.duration" = 2.0\n"simulation.metric_window" = [0.0, 2.0]\n'
+        '[grid]\n"robot.mass" = [9.0, 11.0]\n"simulation.divergence_error" = [50.0, 0.05]\n'
+    )
     records = {}
     for workers in (1, 2):
         out = tmp_path / f"out{workers}"

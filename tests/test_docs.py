@@ -1,17 +1,21 @@
 """The package stands alone: no user-facing text sends a user to files they do not have (the developers' SPEC or
 DESIGN), every "model.md §x.y" citation lands on a section of docs/model.md, and every relative link in the README
 and docs lands on a file and, with an anchor, on a heading."""
+
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
-
 from conftest import ROOT
 
-USER_FACING = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "src").rglob("*.py")),
-               *sorted((ROOT / "examples").glob("*.py")), *sorted((ROOT / "scenarios").glob("*.toml"))]
+USER_FACING = [
+    ROOT / "README.md",
+    *sorted((ROOT / "docs").glob("*.md")),
+    *sorted((ROOT / "src").rglob("*.py")),
+    *sorted((ROOT / "examples").glob("*.py")),
+    *sorted((ROOT / "scenarios").glob("*.toml")),
+]
 MARKDOWN = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 

@@ -1,5 +1,6 @@
 """The Gymnasium environment ddtrack/DiffDriveTracking-v0: API conformance, determinism, and that it steps
 exactly as the simulator does."""
+
 from __future__ import annotations
 
 import math
@@ -10,10 +11,10 @@ import warnings
 import gymnasium
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 from gymnasium.utils.env_checker import check_env
 
 import ddtrack
-from conftest import SCENARIOS
 from ddtrack.envs import ENV_ID, DiffDriveTrackingEnv, register_envs
 from ddtrack.envs.tracking import GAMMA
 from ddtrack.geometry import posture_error
@@ -23,8 +24,9 @@ MODES = ("torque", "gains")
 
 
 def short(seconds: float, *extra: str) -> ddtrack.Scenario:
-    return ddtrack.load_scenario(PAPER_LINE, overrides=[f"simulation.duration={seconds}",
-                                                        f"simulation.metric_window=[0, {seconds}]", *extra])
+    return ddtrack.load_scenario(
+        PAPER_LINE, overrides=[f"simulation.duration={seconds}", f"simulation.metric_window=[0, {seconds}]", *extra]
+    )
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -74,8 +76,10 @@ def test_importing_ddtrack_registers_the_environment():
 
 @pytest.mark.parametrize("mode", MODES)
 def test_a_seeded_rollout_is_identical_twice(mode):
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml",  # Gaussian disturbance, measurement noise
-                                     overrides=["simulation.duration=3", "simulation.metric_window=[0, 3]"])
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml",  # Gaussian disturbance, measurement noise
+        overrides=["simulation.duration=3", "simulation.metric_window=[0, 3]"],
+    )
 
     def rollout():
         env = DiffDriveTrackingEnv(scenario, action_mode=mode)
@@ -120,10 +124,10 @@ def test_constant_gains_reproduce_the_run():
     result = ddtrack.run(scenario, seed=0)
     env = DiffDriveTrackingEnv(scenario, action_mode="gains")
     assert np.array_equal(env.gains_to_action(scenario.controller.gains), np.zeros(3))
-    obs, info = env.reset(seed=0)
+    _obs, info = env.reset(seed=0)
     states, rewards, controls = [info["state"]], [], []
     for _ in range(scenario.simulation.n_steps - 1):
-        obs, reward, terminated, truncated, info = env.step(np.zeros(3, np.float32))
+        _obs, reward, terminated, truncated, info = env.step(np.zeros(3, np.float32))
         assert not terminated and not truncated and np.array_equal(info["gains"], scenario.controller.gains)
         states.append(info["state"])
         rewards.append(reward)
@@ -138,13 +142,16 @@ def test_constant_gains_reproduce_the_run():
     np.testing.assert_allclose(rewards, -scenario.simulation.control_period * cost, rtol=1e-9)
 
 
-@pytest.mark.parametrize("action_dtype, atol", [
-    (np.float64, 1e-10),  # tau / max * max is tau to an ulp; an ulp of torque moves a 40 s open loop by ~1e-14 m
-    # float32 rounds each torque by up to 6e-8 relative (6e-7 N m at 10 N m): even all of one sign for 40 s,
-    # 6e-7 N m * 2 / (m R = 0.6 kg m) = 2e-6 m/s^2 moves the robot 0.5 * 2e-6 * 40^2 = 1.6e-3 m; random
-    # signs average out to ~1e-6 m, measured 2e-7 m
-    (np.float32, 1e-4),
-])
+@pytest.mark.parametrize(
+    "action_dtype, atol",
+    [
+        (np.float64, 1e-10),  # tau / max * max is tau to an ulp; an ulp of torque moves a 40 s open loop by ~1e-14 m
+        # float32 rounds each torque by up to 6e-8 relative (6e-7 N m at 10 N m): even all of one sign for 40 s,
+        # 6e-7 N m * 2 / (m R = 0.6 kg m) = 2e-6 m/s^2 moves the robot 0.5 * 2e-6 * 40^2 = 1.6e-3 m; random
+        # signs average out to ~1e-6 m, measured 2e-7 m
+        (np.float32, 1e-4),
+    ],
+)
 def test_replayed_torques_reproduce_the_run(action_dtype, atol):
     scenario = ddtrack.load_scenario(PAPER_LINE)
     result = ddtrack.run(scenario, seed=0)
@@ -222,8 +229,7 @@ def test_gains_action_maps_zero_to_the_scenario_s_gains_and_the_ends_to_the_boun
     np.testing.assert_allclose(gains[1.0], [10.0, 600.0, 60.0], rtol=1e-12)
     assert np.array_equal(gains[7.0], gains[1.0])  # out-of-range actions are clipped
     middle = np.array([5.0, 100.0, 1.0])
-    np.testing.assert_allclose(
-        env.step(env.gains_to_action(middle))[4]["gains"], middle, rtol=1e-12)
+    np.testing.assert_allclose(env.step(env.gains_to_action(middle))[4]["gains"], middle, rtol=1e-12)
 
 
 def test_bad_arguments_are_config_errors_naming_the_argument():
@@ -244,8 +250,9 @@ def test_bad_arguments_are_config_errors_naming_the_argument():
 
 
 def test_an_nn_adaptive_scenario_runs_as_backstepping_with_its_own_gain_bounds():
-    scenario = ddtrack.load_scenario(PAPER_LINE, controller="nn_adaptive_backstepping",
-                                     overrides=["controller.gain_max=[5.0, 100.0, 20.0]"])
+    scenario = ddtrack.load_scenario(
+        PAPER_LINE, controller="nn_adaptive_backstepping", overrides=["controller.gain_max=[5.0, 100.0, 20.0]"]
+    )
     env = DiffDriveTrackingEnv(scenario, action_mode="gains")
     assert env.scenario.controller.kind == "backstepping"
     assert env.scenario.controller.gains == scenario.controller.gains

@@ -3,6 +3,7 @@
 A script may name its arguments for the test in a comment ``# test-args: ...`` (a shorter run). Each one
 needs an entry in CHECKS, so a new example cannot go untested.
 """
+
 from __future__ import annotations
 
 import ast
@@ -13,7 +14,6 @@ import subprocess
 import sys
 
 import pytest
-
 from conftest import ROOT
 
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))

@@ -5,6 +5,7 @@ and the remedy (``sim.REMEDIES``); ``metrics.json`` is strict JSON with the stat
 statistics; ``timeseries.parquet`` holds the rows up to and including the failing period, and nothing else.
 Then a Monte Carlo batch and a sweep holding a failing run carry on with the others.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -17,10 +18,10 @@ import jax.numpy as jnp
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
 import ddtrack.runner
-from conftest import SCENARIOS
 from ddtrack._pytree import pytree_dataclass
 from ddtrack.metrics import summarize
 from ddtrack.sim import REMEDIES
@@ -28,13 +29,29 @@ from ddtrack.sim import REMEDIES
 SHORT = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
 # the columns that hold x_k, ref_k and e_p(x_k, ref_k): finite on every row, the failing one included (the state is
 # frozen at the last finite value); the commands and logs of the failing row may be what made it fail
-STATE_COLUMNS = ("t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref",
-                 "e_x", "e_y", "e_theta", "e_tr")
+STATE_COLUMNS = (
+    "t",
+    "x",
+    "y",
+    "theta",
+    "v",
+    "omega",
+    "x_ref",
+    "y_ref",
+    "theta_ref",
+    "v_ref",
+    "omega_ref",
+    "e_x",
+    "e_y",
+    "e_theta",
+    "e_tr",
+)
 STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
 
 
 def strict_json(text: str) -> Any:
     """json.loads that rejects NaN, Infinity and -Infinity (Python's json accepts them by default)."""
+
     def reject(constant: str) -> None:
         raise ValueError(f"non-standard JSON constant {constant}")
 
@@ -82,8 +99,9 @@ def test_unstable_inner_loop_diverges(tmp_path, cli):
 
 def test_unstable_gains_that_overflow_are_non_finite(tmp_path, cli):
     """K_c = 1e8 /s, no torque limit and no divergence bound to stop it first: the first period overflows."""
-    out, code, stderr = run_cli(cli, tmp_path, "controller.kc=[1e8, 1e8]", "robot.max_torque=1e300",
-                                "simulation.divergence_error=1e300")
+    out, code, stderr = run_cli(
+        cli, tmp_path, "controller.kc=[1e8, 1e8]", "robot.max_torque=1e300", "simulation.divergence_error=1e300"
+    )
     columns = assert_failed_run(out, code, stderr, "non_finite", 0.0)
     assert abs(columns["tau_r"][-1]) > 1e6  # the recorded torque is finite, but x_1 under it overflowed
 
@@ -148,8 +166,19 @@ def test_mc_carries_on_past_a_diverged_run(tmp_path, cli):
     ok and their metrics equal their single runs; the diverged one has null metrics; the files are strict JSON."""
     overrides = [*SHORT, "simulation.divergence_error=0.05"]
     out = tmp_path / "mc"
-    code, stdout, stderr = cli("mc", SCENARIOS / "figure_eight.toml", "-n", "3", "--vary", "mass=uniform:0.2",
-                               *[a for o in overrides for a in ("--set", o)], "--chunk", "3", "--out", out)
+    code, _stdout, stderr = cli(
+        "mc",
+        SCENARIOS / "figure_eight.toml",
+        "-n",
+        "3",
+        "--vary",
+        "mass=uniform:0.2",
+        *[a for o in overrides for a in ("--set", o)],
+        "--chunk",
+        "3",
+        "--out",
+        out,
+    )
     assert code == 1 and "1 of 3 runs diverged" in stderr, stderr  # results written; exit 1 as for run and sweep
     rows = pq.read_table(out / "runs.parquet").to_pylist()
     assert [r["status"] for r in rows] == ["ok", "diverged", "ok"]
@@ -157,13 +186,19 @@ def test_mc_carries_on_past_a_diverged_run(tmp_path, cli):
     summary = strict_json((out / "summary.json").read_text())
     assert summary["controllers"]["backstepping"]["failures"] == 1
     assert summary["controllers"]["backstepping"]["e_tr_mean"]["n"] == 2
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml",
-                                     overrides=[*overrides, 'randomize.mass={distribution="uniform", relative=0.2}'])
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml", overrides=[*overrides, 'randomize.mass={distribution="uniform", relative=0.2}']
+    )
     sim = scenario.simulation
     for seed in (0, 2):
         single = ddtrack.run(scenario, seed=seed)
-        expected = summarize(ddtrack.timeseries(single), status=single.status_name, window=sim.window,
-                             control_period=sim.control_period, settling_threshold=sim.settling_threshold)
+        expected = summarize(
+            ddtrack.timeseries(single),
+            status=single.status_name,
+            window=sim.window,
+            control_period=sim.control_period,
+            settling_threshold=sim.settling_threshold,
+        )
         for name in STATISTICS:
             # vmapped vs single: XLA may reassociate a sum (tests/test_determinism.py measures the difference)
             assert rows[seed][name] == pytest.approx(expected[name], rel=0, abs=1e-12), name
@@ -175,9 +210,11 @@ def test_sweep_carries_on_past_an_unstable_value(tmp_path, cli):
     null metrics and the sweep exits 1; the stable configuration's runs are ok and equal to direct runs."""
     shutil.copy(SCENARIOS / "figure_eight.toml", tmp_path / "figure_eight.toml")
     path = tmp_path / "sweep.toml"
-    path.write_text('scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = 2\nchunk = 2\n'
-                    '[set]\n"simulation.duration" = 2.0\n"simulation.metric_window" = [0.0, 2.0]\n'
-                    '"robot.max_torque" = 1e6\n[grid]\n"controller.kc" = [[10.0, 10.0], [1000.0, 1000.0]]\n')
+    path.write_text(
+        'scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = 2\nchunk = 2\n'
+        '[set]\n"simulation.duration" = 2.0\n"simulation.metric_window" = [0.0, 2.0]\n'
+        '"robot.max_torque" = 1e6\n[grid]\n"controller.kc" = [[10.0, 10.0], [1000.0, 1000.0]]\n'
+    )
     out = tmp_path / "out"
     code, stdout, stderr = cli("sweep", path, "--out", out, "--workers", "1")
     assert code == 1, stderr
@@ -190,8 +227,15 @@ def test_sweep_carries_on_past_an_unstable_value(tmp_path, cli):
     for record in by_kc[(1000.0, 1000.0)]:
         assert record["metrics"]["failure_time"] is not None
         assert all(record["metrics"][name] is None for name in STATISTICS)
-    scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[
-        "simulation.duration=2", "simulation.metric_window=[0, 2]", "robot.max_torque=1e6", "controller.kc=[10, 10]"])
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml",
+        overrides=[
+            "simulation.duration=2",
+            "simulation.metric_window=[0, 2]",
+            "robot.max_torque=1e6",
+            "controller.kc=[10, 10]",
+        ],
+    )
     direct = {row["seed"]: row for row in ddtrack.runner.monte_carlo(scenario, [0, 1], chunk_size=2)}
     assert sorted(r["seed"] for r in by_kc[(10.0, 10.0)]) == [0, 1]
     for record in by_kc[(10.0, 10.0)]:

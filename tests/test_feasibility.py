@@ -1,17 +1,17 @@
 """Scenarios that cannot mean what they say are refused when loaded (exit 2, naming the field and the numbers),
 and a failed run's remedy names its cause."""
+
 from __future__ import annotations
 
 import math
 
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack
 from ddtrack.errors import ConfigError
 from ddtrack.sim import remedy
-
-from conftest import SCENARIOS
 
 
 def test_a_reference_faster_than_the_clamp_is_refused(cli):

@@ -1,14 +1,24 @@
 """A long lone run shows what it is doing on a terminal (an NN identification takes seconds), and nothing extra
 when its output goes to a pipe or a file."""
+
 from __future__ import annotations
 
 import sys
 
 from conftest import SCENARIOS
 
-NN = ("--controller", "nn_adaptive_backstepping", "--set", "controller.epochs=1",
-      "--set", "controller.identification_duration=1", "--set", "simulation.duration=1",
-      "--set", "simulation.metric_window=[0, 1]")
+NN = (
+    "--controller",
+    "nn_adaptive_backstepping",
+    "--set",
+    "controller.epochs=1",
+    "--set",
+    "controller.identification_duration=1",
+    "--set",
+    "simulation.duration=1",
+    "--set",
+    "simulation.metric_window=[0, 1]",
+)
 
 
 def test_a_terminal_sees_the_phases_of_a_run(tmp_path, cli, monkeypatch):
@@ -16,8 +26,11 @@ def test_a_terminal_sees_the_phases_of_a_run(tmp_path, cli, monkeypatch):
     code, stdout, stderr = cli("run", SCENARIOS / "paper_line.toml", *NN, "--out", tmp_path / "run")
     assert code == 0
     phases = [part.strip(" .") for part in stderr.split("\r\033[K") if part.strip(" .") and "warning" not in part]
-    assert phases[:3] == ["identifying the robot: the NN emulator's pre-training run", "simulating 1 s",
-                          "writing the run folder and its figures"]
+    assert phases[:3] == [
+        "identifying the robot: the NN emulator's pre-training run",
+        "simulating 1 s",
+        "writing the run folder and its figures",
+    ]
     assert "\r" not in stdout  # the results stay plain
 
 

@@ -1,22 +1,28 @@
 """The run figures say what they show: titles name the controller, states.png shows v and omega with their
 references, the metric window and the torque limit have legend entries, the torque axis fits the torques, the legend
 sits above the data, and a kinematic run gets no torque figure."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import SCENARIOS
 
 from ddtrack.plotting import plot_errors, plot_path, plot_states, plot_torques, plt
-
-from conftest import SCENARIOS
 
 
 def columns(n: int = 200, torque: float = 1.0) -> dict[str, np.ndarray]:
     t = np.linspace(0.0, 2.0, n)
     c = {"t": t, "x": t, "y": 0.1 * t, "theta": 0.1 + 0 * t, "v": 1 + 0 * t, "omega": 0 * t}
     c |= {f"{k}_ref": v + 0.01 for k, v in list(c.items()) if k != "t"}
-    c |= {"e_x": 0.01 + 0 * t, "e_y": 0.01 + 0 * t, "e_theta": 0 * t, "e_tr": 0.014 + 0 * t,
-          "tau_r": torque * np.sin(t), "tau_l": -torque * np.sin(t)}
+    c |= {
+        "e_x": 0.01 + 0 * t,
+        "e_y": 0.01 + 0 * t,
+        "e_theta": 0 * t,
+        "e_tr": 0.014 + 0 * t,
+        "tau_r": torque * np.sin(t),
+        "tau_l": -torque * np.sin(t),
+    }
     return c
 
 
@@ -43,7 +49,7 @@ def test_the_metric_window_has_a_legend_entry():
 def test_the_torque_axis_fits_the_torques(limit, drawn):
     fig = plot_torques(columns(torque=1.0), max_torque=limit)
     ax = fig.axes[0]
-    low, high = ax.get_ylim()
+    _low, high = ax.get_ylim()
     assert high < 2.0 * max(1.0, limit if drawn else 1.0)  # the torques, not a far limit, set the scale
     entry = [text for text in labels(ax) if text.startswith("limit")]
     assert len(entry) == 1 and ("off scale" in entry[0]) == (not drawn)
@@ -64,8 +70,18 @@ def test_run_figures_are_titled_and_a_kinematic_run_has_no_torques(tmp_path, cli
     from PIL import Image  # noqa: F401  (the PNGs are real images)
 
     out = tmp_path / "run"
-    code, _, _ = cli("run", SCENARIOS / "circle.toml", "--controller", "kinematic_backstepping",
-                     "--set", "simulation.duration=2", "--set", "simulation.metric_window=[0, 2]", "--out", out)
+    code, _, _ = cli(
+        "run",
+        SCENARIOS / "circle.toml",
+        "--controller",
+        "kinematic_backstepping",
+        "--set",
+        "simulation.duration=2",
+        "--set",
+        "simulation.metric_window=[0, 2]",
+        "--out",
+        out,
+    )
     assert code == 0
     assert sorted(p.name for p in (out / "figures").iterdir()) == ["errors.png", "path.png", "states.png"]
 

@@ -1,4 +1,5 @@
 """Printed numbers keep their significant digits at every scale (a TurtleBot's effort is 0.0043, not 0.0)."""
+
 from __future__ import annotations
 
 import math

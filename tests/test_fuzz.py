@@ -4,6 +4,7 @@ with exit code 2 and a one-or-two-line message naming the field, no traceback, n
 The mutations are the plain functions of bench/fuzz_inputs.py (loaded by path), driven here by Hypothesis;
 ``python bench/fuzz_inputs.py --cases 3000`` runs many more and tallies the outcomes per kind.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -15,10 +16,9 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import ROOT, SCENARIOS
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
-from conftest import ROOT, SCENARIOS
 
 _spec = importlib.util.spec_from_file_location("fuzz_inputs", ROOT / "bench" / "fuzz_inputs.py")
 FUZZ = importlib.util.module_from_spec(_spec)
@@ -28,10 +28,25 @@ _spec.loader.exec_module(FUZZ)
 SCENARIO_BASES = FUZZ.scenario_bases()
 SWEEP_BASES = FUZZ.sweep_bases()
 #: kinds whose every mutant is invalid: each must be refused (the others may also be accepted)
-ALWAYS_REFUSED = {"wrong_type", "unknown_key", "misspelt_key", "nan_inf", "nonpositive", "window_outside",
-                  "gains_out_of_range", "bad_waypoints", "invalid_utf8", "bad_design"}
-FUZZ_SETTINGS = settings(derandomize=True, max_examples=100, deadline=None, database=None,
-                         suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+ALWAYS_REFUSED = {
+    "wrong_type",
+    "unknown_key",
+    "misspelt_key",
+    "nan_inf",
+    "nonpositive",
+    "window_outside",
+    "gains_out_of_range",
+    "bad_waypoints",
+    "invalid_utf8",
+    "bad_design",
+}
+FUZZ_SETTINGS = settings(
+    derandomize=True,
+    max_examples=100,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 _counter = itertools.count()
 
 
@@ -93,7 +108,7 @@ def test_the_bench_tally_has_no_bad_case(capsys, tmp_path):
     """The bench script's own loop, on a few cases of every kind: its table ends with 0 bad cases."""
     assert FUZZ.main(["--cases", "120", "--runs", "0", "--seed", "7", "--workdir", str(tmp_path)]) == 0
     table = capsys.readouterr().out
-    last = [line for line in table.splitlines() if line.startswith("| all | all |")][0]
+    last = next(line for line in table.splitlines() if line.startswith("| all | all |"))
     assert last.endswith("| 0 |") and "| 120 |" in last
 
 
@@ -110,11 +125,14 @@ def test_seed_beyond_int64_is_refused_not_a_traceback(tmp_path, cli):
     assert code == 0
 
 
-@pytest.mark.parametrize("override, field", [
-    ("trajectory.center=[1e308, 0]", "trajectory.center[0]"),
-    ("initial.pose=[0, 1e300, 0]", "initial.pose[1]"),
-    ("trajectory.radius=1e308", "trajectory.radius"),
-])
+@pytest.mark.parametrize(
+    "override, field",
+    [
+        ("trajectory.center=[1e308, 0]", "trajectory.center[0]"),
+        ("initial.pose=[0, 1e300, 0]", "initial.pose[1]"),
+        ("trajectory.radius=1e308", "trajectory.radius"),
+    ],
+)
 def test_huge_coordinates_are_refused(tmp_path, cli, override, field):
     """A centre of 1e308 m validated, ran, wrote metrics.json, then matplotlib's tick locator raised
     ("arange: cannot compute length") and left half a run folder; a start of 2**64 m raised LinAlgError."""
@@ -161,7 +179,8 @@ def test_a_bad_seed_count_in_a_sweep_names_seeds_count(tmp_path, cli):
 
 def test_a_square_too_small_for_distinct_corners_is_refused(tmp_path, cli):
     """trajectory.side = 5e-324 validated, then `ddtrack run` raised ValueError ('point 1 repeats point 0')."""
-    code, out, err = cli("run", SCENARIOS / "paper_square.toml", "--set", "trajectory.side=5e-324",
-                         "--out", tmp_path / "out")
+    code, out, err = cli(
+        "run", SCENARIOS / "paper_square.toml", "--set", "trajectory.side=5e-324", "--out", tmp_path / "out"
+    )
     assert (code, out) == (2, "") and err.startswith("error: trajectory.side: ")
     assert not (tmp_path / "out").exists()

@@ -1,5 +1,6 @@
 """The fixed-step RK4 integrator: its coefficients, its measured order, and the plant integration
 cross-checked against scipy's adaptive high-order solvers (SPEC 4.1: RK4 with 1 ms sub-steps)."""
+
 from functools import partial
 
 import jax
@@ -19,8 +20,17 @@ N_PERIODS = 300
 SUBSTEPS = 10
 
 # the "true" plant of SPEC 1.4 with the wheel friction of the brief
-TRUE = dict(mass=12.0, inertia=0.70, com_offset=0.08, wheel_radius=0.05, half_axle=0.25,
-            viscous_friction=0.005, coulomb_friction=0.05, friction_smoothing=0.01, max_torque=10.0)
+TRUE = {
+    "mass": 12.0,
+    "inertia": 0.70,
+    "com_offset": 0.08,
+    "wheel_radius": 0.05,
+    "half_axle": 0.25,
+    "viscous_friction": 0.005,
+    "coulomb_friction": 0.05,
+    "friction_smoothing": 0.01,
+    "max_torque": 10.0,
+}
 TAU_D = np.array([0.03, -0.02])  # constant wheel disturbance [N m]
 
 
@@ -74,8 +84,7 @@ def test_rk4_global_order_on_closed_form_problem():
     duration = 1.2
     steps = [12, 24, 48, 96]
     exact = np.array([np.tan(duration), np.cos(duration)])
-    errors = [np.max(np.abs(np.asarray(integrate(f, jnp.array([0.0, 1.0]), duration, n)) - exact))
-              for n in steps]
+    errors = [np.max(np.abs(np.asarray(integrate(f, jnp.array([0.0, 1.0]), duration, n)) - exact)) for n in steps]
     assert errors[-1] > 1e-12  # still far above rounding, so the slopes measure truncation
     pairwise, fitted = observed_orders(steps, errors)
     assert np.all((pairwise > 3.7) & (pairwise < 4.3)), pairwise  # RK4: global error ~ C h^4
@@ -128,8 +137,9 @@ def scipy_zoh(x0, torques, method="DOP853"):
     """Integrate period by period under a zero-order hold; returns the states at t_0 .. t_N."""
     states = [np.asarray(x0, float)]
     for tau in torques:
-        sol = solve_ivp(scipy_rhs, (0.0, CONTROL_PERIOD), states[-1], method=method, rtol=1e-12, atol=1e-12,
-                        args=(tau, TAU_D))
+        sol = solve_ivp(
+            scipy_rhs, (0.0, CONTROL_PERIOD), states[-1], method=method, rtol=1e-12, atol=1e-12, args=(tau, TAU_D)
+        )
         assert sol.success
         states.append(sol.y[:, -1])
     return np.array(states)
@@ -194,9 +204,18 @@ def test_simulator_schedule_matches_scipy(forward_drive):
             return self.table[k], k + 1, {}
 
     plant = DynamicPlant(RobotParams(**TRUE))
-    result = simulate(plant, Replay(jnp.asarray(torques)), Line(), jnp.asarray(x0), Draws.zeros(N_PERIODS),
-                      n_steps=N_PERIODS, control_period=CONTROL_PERIOD, substeps=SUBSTEPS,
-                      disturbance=WheelDisturbance(bias=tuple(TAU_D)), divergence_error=1e9)
+    result = simulate(
+        plant,
+        Replay(jnp.asarray(torques)),
+        Line(),
+        jnp.asarray(x0),
+        Draws.zeros(N_PERIODS),
+        n_steps=N_PERIODS,
+        control_period=CONTROL_PERIOD,
+        substeps=SUBSTEPS,
+        disturbance=WheelDisturbance(bias=tuple(TAU_D)),
+        divergence_error=1e9,
+    )
     assert int(result.status) == 0
     # simulate records x_k at t_k (k = 0..N-1), the state before the k-th period's integration
     np.testing.assert_allclose(np.asarray(result.state), reference[:-1], rtol=0, atol=1e-8)  # as above
@@ -210,8 +229,9 @@ def test_plant_integration_through_wheel_reversals_converges_to_scipy():
     error O(h * tau_c / (R m)) rather than O(h^4). 1e-8 at 10 sub-steps is not reachable there. What
     must hold is convergence to the scipy solution as the sub-step shrinks."""
     rng = np.random.default_rng(7)
-    torques = 5.0 * np.column_stack([smooth_random(rng, N_PERIODS, CONTROL_PERIOD),
-                                     smooth_random(rng, N_PERIODS, CONTROL_PERIOD)])
+    torques = 5.0 * np.column_stack(
+        [smooth_random(rng, N_PERIODS, CONTROL_PERIOD), smooth_random(rng, N_PERIODS, CONTROL_PERIOD)]
+    )
     x0 = np.array([0.5, -1.0, 0.3, 0.0, 0.0])
     reference = scipy_zoh(x0, torques)
     reversals = np.sum(np.diff(np.sign(wheel_speeds_np(reference)[1:]), axis=0) != 0)

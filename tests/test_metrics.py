@@ -1,5 +1,6 @@
 """Metrics (SPEC 4.4, 6.26, 6.27): statistics on synthetic arrays with hand-computed answers, summaries
 of failed runs, and zero steady error without uncertainty."""
+
 from __future__ import annotations
 
 import json
@@ -13,7 +14,15 @@ import pytest
 
 import ddtrack
 from ddtrack.controllers import Backstepping, Cascade, ComputedTorque
-from ddtrack.metrics import effort, improvement, pooled_improvement, saturation_fraction, settling_time, summarize, window_statistics
+from ddtrack.metrics import (
+    effort,
+    improvement,
+    pooled_improvement,
+    saturation_fraction,
+    settling_time,
+    summarize,
+    window_statistics,
+)
 from ddtrack.model import DynamicPlant, RobotParams
 from ddtrack.sim import Draws, simulate
 from ddtrack.trajectories import Line
@@ -109,9 +118,16 @@ def test_saturation_fraction_by_hand():
 
 def test_summarize_ok_run_by_hand():
     t = np.arange(6) * 0.5
-    columns = {"t": t, "e_tr": np.array([0.5, 0.3, 0.05, 0.2, 0.05, 0.01]),
-               "tau_r": np.ones(6), "tau_l": -np.ones(6), "saturated": np.array([1.0, 1.0, 0, 0, 0, 0]),
-               "kx": np.full(6, 1.0), "ky": np.full(6, 55.0), "ktheta": np.full(6, 15.0)}
+    columns = {
+        "t": t,
+        "e_tr": np.array([0.5, 0.3, 0.05, 0.2, 0.05, 0.01]),
+        "tau_r": np.ones(6),
+        "tau_l": -np.ones(6),
+        "saturated": np.array([1.0, 1.0, 0, 0, 0, 0]),
+        "kx": np.full(6, 1.0),
+        "ky": np.full(6, 55.0),
+        "ktheta": np.full(6, 15.0),
+    }
     metrics = summarize(columns, status="ok", window=(1.0, 2.5), control_period=0.5, settling_threshold=0.1)
     assert metrics["status"] == "ok" and metrics["window"] == [1.0, 2.5]
     assert metrics["e_tr_mean"] == pytest.approx((0.05 + 0.2 + 0.05 + 0.01) / 4, rel=1e-14)
@@ -126,17 +142,32 @@ def test_summarize_ok_run_by_hand():
 def test_summarize_failed_run_is_null_and_valid_json():
     """A real failed run (absurd outer gains, clamps off): statistics are null, the failure time is kept."""
     trajectory = Line(start=(0.2, 0.1), heading=0.9, speed=0.5)
-    controller = Cascade(Backstepping(kx=1e4, ky=1e7, ktheta=1e4, max_velocity=1e9, max_yaw_rate=1e9),
-                         ComputedTorque(RobotParams(max_torque=1e9)))
+    controller = Cascade(
+        Backstepping(kx=1e4, ky=1e7, ktheta=1e4, max_velocity=1e9, max_yaw_rate=1e9),
+        ComputedTorque(RobotParams(max_torque=1e9)),
+    )
     ref0 = trajectory(0.0)
     x0 = jnp.asarray([float(ref0.x), float(ref0.y) + 0.5, float(ref0.theta) + 0.3, 0.0, 0.0])
     n = 2000
-    result = simulate(DynamicPlant(RobotParams(max_torque=1e9)), controller, trajectory, x0, Draws.zeros(n),
-                      n_steps=n, control_period=0.01)
+    result = simulate(
+        DynamicPlant(RobotParams(max_torque=1e9)),
+        controller,
+        trajectory,
+        x0,
+        Draws.zeros(n),
+        n_steps=n,
+        control_period=0.01,
+    )
     assert result.status_name in ("diverged", "non_finite")
     columns = ddtrack.timeseries(result)
-    metrics = summarize(columns, status=result.status_name, window=(0.0, 20.0), control_period=0.01,
-                        settling_threshold=0.1, failure_time=result.failure_time)
+    metrics = summarize(
+        columns,
+        status=result.status_name,
+        window=(0.0, 20.0),
+        control_period=0.01,
+        settling_threshold=0.1,
+        failure_time=result.failure_time,
+    )
     for key in ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction"):
         assert metrics[key] is None, key
     assert metrics["status"] == result.status_name
@@ -147,11 +178,19 @@ def test_summarize_failed_run_is_null_and_valid_json():
 
 def test_summarize_failed_run_with_non_finite_columns():
     """Even when the recorded columns hold NaN and inf (the failing row), the summary is valid JSON."""
-    columns = {"t": np.array([0.0, 0.01]), "e_tr": np.array([0.1, np.nan]), "tau_r": np.array([1.0, np.inf]),
-               "tau_l": np.array([1.0, np.nan]), "saturated": np.zeros(2),
-               "kx": np.array([1.0, np.nan]), "ky": np.array([55.0, 55.0]), "ktheta": np.array([15.0, 15.0])}
-    metrics = summarize(columns, status="non_finite", window=(0.0, 0.01), control_period=0.01,
-                        settling_threshold=0.1, failure_time=0.01)
+    columns = {
+        "t": np.array([0.0, 0.01]),
+        "e_tr": np.array([0.1, np.nan]),
+        "tau_r": np.array([1.0, np.inf]),
+        "tau_l": np.array([1.0, np.nan]),
+        "saturated": np.zeros(2),
+        "kx": np.array([1.0, np.nan]),
+        "ky": np.array([55.0, 55.0]),
+        "ktheta": np.array([15.0, 15.0]),
+    }
+    metrics = summarize(
+        columns, status="non_finite", window=(0.0, 0.01), control_period=0.01, settling_threshold=0.1, failure_time=0.01
+    )
     assert metrics["e_tr_mean"] is None and metrics["effort"] is None
     assert metrics["final_gains"] is None  # a NaN gain is not reported as a number
     json.dumps(metrics, allow_nan=False)
@@ -205,8 +244,9 @@ def _coverage(draw, true_mean: float, domain: str, n: int, repeats: int = 1000) 
 def test_mean_ci_of_skewed_nonnegative_values_stays_nonnegative_and_covers():
     # lognormal(0, 0.5), n = 10: a skewed error over seeds. The log-scale (delta-method) interval's coverage is
     # ~93 % here (measured over 4000 draws; the t-interval's ~92.5 %); 1000 repeats: binomial sd 0.8 %.
-    coverage, coverage_t, inside = _coverage(lambda rng, n: rng.lognormal(0.0, 0.5, n), math.exp(0.125),
-                                             "nonnegative", 10)
+    coverage, coverage_t, inside = _coverage(
+        lambda rng, n: rng.lognormal(0.0, 0.5, n), math.exp(0.125), "nonnegative", 10
+    )
     assert inside
     assert 0.91 <= coverage <= 0.975 and coverage >= coverage_t - 0.01
 

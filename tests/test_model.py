@@ -3,6 +3,7 @@
 Every random sample comes from a numpy Generator with a fixed seed; batches are evaluated with one
 ``jax.vmap`` so that each property costs one compilation.
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -38,18 +39,24 @@ N_SAMPLES = 64
 
 def random_params(rng, n):
     """n random robots, with a signed centre-of-mass offset d (C ahead of or behind the axle)."""
-    return dict(
-        mass=rng.uniform(1.0, 30.0, n),
-        inertia=rng.uniform(0.05, 3.0, n),
-        com_offset=rng.uniform(-0.3, 0.3, n),
-        wheel_radius=rng.uniform(0.02, 0.2, n),
-        half_axle=rng.uniform(0.1, 0.6, n),
-    )
+    return {
+        "mass": rng.uniform(1.0, 30.0, n),
+        "inertia": rng.uniform(0.05, 3.0, n),
+        "com_offset": rng.uniform(-0.3, 0.3, n),
+        "wheel_radius": rng.uniform(0.02, 0.2, n),
+        "half_axle": rng.uniform(0.1, 0.6, n),
+    }
 
 
 def make_params(p, **extra):
-    return RobotParams(mass=p["mass"], inertia=p["inertia"], com_offset=p["com_offset"],
-                       wheel_radius=p["wheel_radius"], half_axle=p["half_axle"], **extra)
+    return RobotParams(
+        mass=p["mass"],
+        inertia=p["inertia"],
+        com_offset=p["com_offset"],
+        wheel_radius=p["wheel_radius"],
+        half_axle=p["half_axle"],
+        **extra,
+    )
 
 
 def batch(fn, *args):
@@ -102,9 +109,13 @@ def test_reduced_mass_and_input_are_projections_of_full_model():
     def one(pp, th):
         params = make_params(pp)
         s = velocity_basis(th)
-        return (s.T @ mass_matrix(params, th) @ s, reduced_mass(params),
-                s.T @ input_matrix(params, th), reduced_input(params),
-                reduced_input(params) @ reduced_input_inverse(params))
+        return (
+            s.T @ mass_matrix(params, th) @ s,
+            reduced_mass(params),
+            s.T @ input_matrix(params, th),
+            reduced_input(params),
+            reduced_input(params) @ reduced_input_inverse(params),
+        )
 
     stms, mbar, stb, bbar, eye = batch(one, p, theta)
     i_a = p["inertia"] + p["mass"] * p["com_offset"] ** 2
@@ -118,8 +129,11 @@ def test_reduced_mass_and_input_are_projections_of_full_model():
     assert np.any(p["com_offset"] < -0.1) and np.any(p["com_offset"] > 0.1)
 
     r = p["wheel_radius"][:, None, None]
-    expected_bbar = np.array([[1.0, 1.0], [1.0, -1.0]])[None] * np.stack(
-        [np.ones(N_SAMPLES), p["half_axle"]], axis=1)[:, :, None] / r
+    expected_bbar = (
+        np.array([[1.0, 1.0], [1.0, -1.0]])[None]
+        * np.stack([np.ones(N_SAMPLES), p["half_axle"]], axis=1)[:, :, None]
+        / r
+    )
     np.testing.assert_allclose(stb, expected_bbar, rtol=1e-14, atol=0)  # c^2 + s^2 = 1 up to rounding
     np.testing.assert_allclose(bbar, expected_bbar, rtol=1e-15, atol=0)
     np.testing.assert_allclose(eye, np.broadcast_to(np.eye(2), eye.shape), rtol=0, atol=1e-14)
@@ -132,8 +146,11 @@ def test_wheel_speeds_and_body_velocity_are_inverse():
 
     def one(pp, n, ph):
         params = make_params(pp)
-        return (wheel_speeds(params, n), body_velocity(params, wheel_speeds(params, n)),
-                wheel_speeds(params, body_velocity(params, ph)))
+        return (
+            wheel_speeds(params, n),
+            body_velocity(params, wheel_speeds(params, n)),
+            wheel_speeds(params, body_velocity(params, ph)),
+        )
 
     w_nu, nu_back, phi_back = batch(one, p, nu, phi)
     np.testing.assert_allclose(nu_back, nu, rtol=1e-13, atol=1e-14)  # a handful of roundings
@@ -222,8 +239,14 @@ def test_body_acceleration_satisfies_full_equations_with_constraint_force():
         b = input_matrix(params, th)
         friction = b @ wheel_friction(params, wheel_speeds(params, n))
         lam = -params.mass * (n[0] * n[1] + params.com_offset * nd[1])
-        residual = (mass_matrix(params, th) @ q_ddot + coriolis_vector(params, th, n[1]) + friction + b @ ud
-                    - b @ u + constraint_matrix(th)[0] * lam)
+        residual = (
+            mass_matrix(params, th) @ q_ddot
+            + coriolis_vector(params, th, n[1])
+            + friction
+            + b @ ud
+            - b @ u
+            + constraint_matrix(th)[0] * lam
+        )
         return residual, b @ u
 
     residual, force = batch(one, p, theta, nu, tau, tau_d)
@@ -233,8 +256,16 @@ def test_body_acceleration_satisfies_full_equations_with_constraint_force():
 
 def test_body_acceleration_scalar_form():
     """The scalar equations of SPEC 1.3, typed out independently."""
-    params = RobotParams(mass=12.0, inertia=0.7, com_offset=0.08, wheel_radius=0.05, half_axle=0.25,
-                         viscous_friction=0.005, coulomb_friction=0.05, friction_smoothing=0.01)
+    params = RobotParams(
+        mass=12.0,
+        inertia=0.7,
+        com_offset=0.08,
+        wheel_radius=0.05,
+        half_axle=0.25,
+        viscous_friction=0.005,
+        coulomb_friction=0.05,
+        friction_smoothing=0.01,
+    )
     v, w = 0.4, -0.7
     tau, tau_d = np.array([1.3, -0.4]), np.array([0.03, -0.02])
     m, i_a, d, r, half = 12.0, 0.7 + 12.0 * 0.08**2, 0.08, 0.05, 0.25
@@ -344,11 +375,15 @@ def test_wheel_disturbance_matches_formula():
     rng = np.random.default_rng(9)
     n = 200
     t, xi = rng.uniform(0, 40, n), rng.standard_normal((n, 2))
-    dist = WheelDisturbance(bias=(0.03, -0.01), amplitude=(0.05, -0.05), frequency=0.5, phase=(0.0, 0.3),
-                            std=(0.02, 0.04))
+    dist = WheelDisturbance(
+        bias=(0.03, -0.01), amplitude=(0.05, -0.05), frequency=0.5, phase=(0.0, 0.3), std=(0.02, 0.04)
+    )
     got = batch(dist.torque, t, xi)
-    expected = (np.array([0.03, -0.01]) + np.array([0.05, -0.05]) * np.sin(0.5 * t[:, None] + np.array([0.0, 0.3]))
-                + np.array([0.02, 0.04]) * xi)
+    expected = (
+        np.array([0.03, -0.01])
+        + np.array([0.05, -0.05]) * np.sin(0.5 * t[:, None] + np.array([0.0, 0.3]))
+        + np.array([0.02, 0.04]) * xi
+    )
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)  # same formula: rounding only
     # Gaussian-only disturbance: the draws are scaled and shifted, bias + std * xi
     gauss = WheelDisturbance(bias=(0.1, 0.2), std=(0.5, 0.25))
@@ -366,4 +401,3 @@ def test_measurement_noise_adds_scaled_draws():
     np.testing.assert_allclose(got, x + np.asarray(std) * xi, rtol=0, atol=1e-15)  # rounding only
     np.testing.assert_array_equal(got[:, 3], x[:, 3])  # zero std leaves that channel untouched
     np.testing.assert_array_equal(batch(MeasurementNoise().measure, x, xi), x)
-

@@ -4,21 +4,21 @@ Jacobian (eq. 34 corrected) and backprop against autodiff and finite differences
 step with gradient-norm clipping, the body-frame one-step targets, the fixed I/O scales and the
 initialisation.
 """
+
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import central_difference
 from jax.flatten_util import ravel_pytree
 
 import ddtrack  # noqa: F401  (float64)
-from conftest import central_difference
 from ddtrack import geometry
 from ddtrack.controllers import MLP, Emulator, Scales, emulator_scales, init_mlp, nn
 from ddtrack.controllers.nn import forward, zeros_like
 from ddtrack.geometry import rotation, wrap_angle
-
 
 # jitted once per shape: eager op-by-op dispatch would dominate the run time of the loops below
 predict = jax.jit(nn.predict)
@@ -34,8 +34,12 @@ body_increment = jax.jit(geometry.body_increment)
 def random_mlp(seed: int, n_in: int = 4, n_hidden: int = 20, n_out: int = 3, scale: float = 1.0) -> MLP:
     """Random weights *and* biases (init_mlp's biases are zero, which would hide b1/b2 errors)."""
     k1, k2, k3, k4 = jax.random.split(jax.random.PRNGKey(seed), 4)
-    return MLP(w1=scale * jax.random.normal(k1, (n_hidden, n_in)), b1=scale * jax.random.normal(k2, (n_hidden,)),
-               w2=scale * jax.random.normal(k3, (n_out, n_hidden)), b2=scale * jax.random.normal(k4, (n_out,)))
+    return MLP(
+        w1=scale * jax.random.normal(k1, (n_hidden, n_in)),
+        b1=scale * jax.random.normal(k2, (n_hidden,)),
+        w2=scale * jax.random.normal(k3, (n_out, n_hidden)),
+        b2=scale * jax.random.normal(k4, (n_out,)),
+    )
 
 
 def random_scales(rng, n_in: int = 4, n_out: int = 3) -> Scales:
@@ -58,7 +62,7 @@ def test_input_jacobian_matches_finite_differences_and_jacfwd(n_in):
         z = rng.uniform(-2.0, 2.0, n_in)
         jac = np.asarray(input_jacobian(mlp, scales, jnp.asarray(z)))
         assert jac.shape == (3, n_in)
-        fd = central_difference(lambda x: predict(mlp, scales, jnp.asarray(x)), z, 1e-5)
+        fd = central_difference(lambda x, mlp=mlp, scales=scales: predict(mlp, scales, jnp.asarray(x)), z, 1e-5)
         # central differences at h = 1e-5: O(h^2) truncation ~1e-10 and rounding ~eps/h ~1e-11, relative
         np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-6 * np.max(np.abs(jac)))
         ad = np.asarray(predict_jacfwd(mlp, scales, jnp.asarray(z)))
@@ -74,8 +78,12 @@ def test_input_jacobian_closed_form_in_index_notation():
     w1, b1, w2 = (np.asarray(a) for a in (mlp.w1, mlp.b1, mlp.w2))
     sz, sy = np.asarray(scales.inputs), np.asarray(scales.outputs)
     h = np.tanh(w1 @ (z / sz) + b1)
-    expected = np.array([[sy[i] * sum(w2[i, l] * (1 - h[l] ** 2) * w1[l, j] for l in range(20)) / sz[j]
-                          for j in range(4)] for i in range(3)])
+    expected = np.array(
+        [
+            [sy[i] * sum(w2[i, k] * (1 - h[k] ** 2) * w1[k, j] for k in range(20)) / sz[j] for j in range(4)]
+            for i in range(3)
+        ]
+    )
     # the same sums in another order: rounding only
     np.testing.assert_allclose(input_jacobian(mlp, scales, jnp.asarray(z)), expected, rtol=1e-12, atol=1e-16)
 
@@ -97,7 +105,10 @@ def test_backprop_matches_autodiff_and_finite_differences():
             np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-14)
         # finite differences of E in every weight, through the flattened parameter vector
         flat, unravel = ravel_pytree(mlp)
-        loss = lambda p: float(sample_loss(unravel(jnp.asarray(p)), z, target))  # noqa: E731
+
+        def loss(p, unravel=unravel, z=z, target=target):
+            return float(sample_loss(unravel(jnp.asarray(p)), z, target))
+
         fd = central_difference(loss, np.asarray(flat), 1e-6)
         ours = np.asarray(ravel_pytree(grad)[0])
         # h = 1e-6 on a loss of O(1): truncation ~1e-12, rounding ~eps/h ~1e-10; SPEC 6.21 asks 1e-6
@@ -191,12 +202,17 @@ def test_translation_along_the_heading_is_forward_only():
         np.testing.assert_allclose(inc, [distance, 0.0, 0.0], rtol=0, atol=1e-13)
 
 
-@pytest.mark.parametrize(("theta", "d_theta"), [
-    (0.3, 0.02), (-1.0, -0.03),
-    (np.pi - 0.01, 0.03),  # crosses +pi: the next heading is stored as about -pi + 0.02
-    (-np.pi + 0.01, -0.03),  # crosses -pi
-    (np.pi, 0.01), (np.pi, -0.01),
-])
+@pytest.mark.parametrize(
+    ("theta", "d_theta"),
+    [
+        (0.3, 0.02),
+        (-1.0, -0.03),
+        (np.pi - 0.01, 0.03),  # crosses +pi: the next heading is stored as about -pi + 0.02
+        (-np.pi + 0.01, -0.03),  # crosses -pi
+        (np.pi, 0.01),
+        (np.pi, -0.01),
+    ],
+)
 def test_pure_rotation_gives_the_wrapped_heading_change(theta, d_theta):
     pose = np.array([1.5, -2.0, theta])
     for stored in (theta + d_theta, float(wrap_angle(theta + d_theta))):  # unwrapped and wrapped storage
@@ -286,8 +302,9 @@ def test_forward_is_tanh_hidden_linear_output():
     # same operations in numpy: rounding only
     np.testing.assert_allclose(hidden, h, rtol=1e-14, atol=1e-15)
     np.testing.assert_allclose(out, w2 @ h + b2, rtol=1e-13, atol=1e-14)
-    np.testing.assert_allclose(predict(mlp, scales, jnp.asarray(z)), np.asarray(scales.outputs) * (w2 @ h + b2),
-                               rtol=1e-13, atol=1e-16)
+    np.testing.assert_allclose(
+        predict(mlp, scales, jnp.asarray(z)), np.asarray(scales.outputs) * (w2 @ h + b2), rtol=1e-13, atol=1e-16
+    )
     target = rng.uniform(-1, 1, 3)
     loss = float(sample_loss(mlp, jnp.asarray(z / np.asarray(scales.inputs)), jnp.asarray(target)))
     assert loss == pytest.approx(0.5 * np.sum((w2 @ h + b2 - target) ** 2), rel=1e-13)

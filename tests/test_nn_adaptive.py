@@ -5,6 +5,7 @@ The closed-loop tests share one compiled simulator per controller structure: eve
 below is the full 40 s scenario (a run costs well under a second once compiled), and runs that only
 change the gain law reuse one identification through ``prepare(..., identification=...)``.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -14,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import central_difference
 from jax.flatten_util import ravel_pytree
 
 import ddtrack
-from conftest import central_difference
 from ddtrack.controllers import (
     AdaptiveMemory,
     ComputedTorque,
@@ -45,8 +46,31 @@ NN = "controller.kind=nn_adaptive_backstepping"
 WINDOW = (20.0, 40.0)  # the paper line's steady-state metric window (SPEC 4.4)
 TC = 0.01
 # the columns that backstepping and the NN-adaptive controller both produce
-SHARED = ("t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref", "e_x", "e_y",
-          "e_theta", "e_tr", "v_cmd", "omega_cmd", "tau_r", "tau_l", "kx", "ky", "ktheta", "saturated")
+SHARED = (
+    "t",
+    "x",
+    "y",
+    "theta",
+    "v",
+    "omega",
+    "x_ref",
+    "y_ref",
+    "theta_ref",
+    "v_ref",
+    "omega_ref",
+    "e_x",
+    "e_y",
+    "e_theta",
+    "e_tr",
+    "v_cmd",
+    "omega_cmd",
+    "tau_r",
+    "tau_l",
+    "kx",
+    "ky",
+    "ktheta",
+    "saturated",
+)
 GAINS = ("kx", "ky", "ktheta")
 
 
@@ -75,9 +99,20 @@ def line():
 
 
 def random_reference(rng) -> Reference:
-    return Reference(*(jnp.asarray(v) for v in (rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-3, 3),
-                                                 rng.uniform(0.1, 1.5), rng.uniform(-1, 1), rng.uniform(-1, 1),
-                                                 rng.uniform(-1, 1))))
+    return Reference(
+        *(
+            jnp.asarray(v)
+            for v in (
+                rng.uniform(-5, 5),
+                rng.uniform(-5, 5),
+                rng.uniform(-3, 3),
+                rng.uniform(0.1, 1.5),
+                rng.uniform(-1, 1),
+                rng.uniform(-1, 1),
+                rng.uniform(-1, 1),
+            )
+        )
+    )
 
 
 def random_error(rng) -> np.ndarray:
@@ -95,10 +130,21 @@ def body_basis(theta) -> jnp.ndarray:
 def simulate_unbatched(scenario, setup, draws):
     """One run through the unbatched simulator, ``ddtrack.sim.simulate`` (``ddtrack.run`` uses the batch program)."""
     sim = scenario.simulation
-    return ddtrack.timeseries(simulate(setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
-                                       n_steps=sim.n_steps, control_period=sim.control_period, substeps=sim.substeps,
-                                       disturbance=setup.disturbance, noise=setup.noise,
-                                       divergence_error=scenario.divergence_distance()))
+    return ddtrack.timeseries(
+        simulate(
+            setup.plant,
+            setup.controller,
+            setup.trajectory,
+            setup.x0,
+            draws,
+            n_steps=sim.n_steps,
+            control_period=sim.control_period,
+            substeps=sim.substeps,
+            disturbance=setup.disturbance,
+            noise=setup.noise,
+            divergence_error=scenario.divergence_distance(),
+        )
+    )
 
 
 @pytest.mark.parametrize("identification", [False, True], ids=["untrained", "identified"])
@@ -133,7 +179,9 @@ def test_gain_sensitivity_matches_finite_differences_of_the_law():
         ref, error = random_reference(rng), random_error(rng)
         gains = rng.uniform([0.5, 10.0, 2.0], [5.0, 200.0, 40.0])
         phi = np.asarray(gain_sensitivity(jnp.asarray(error), ref))
-        fd = central_difference(lambda a: kanayama_command(jnp.asarray(error), ref, jnp.asarray(a)), gains, 1e-6)
+        fd = central_difference(
+            lambda a, error=error, ref=ref: kanayama_command(jnp.asarray(error), ref, jnp.asarray(a)), gains, 1e-6
+        )
         # the law is linear in the gains: central differences are exact up to rounding ~eps |nu_c| / h ~ 1e-9
         np.testing.assert_allclose(phi, fd, rtol=1e-7, atol=1e-7 * np.max(np.abs(phi)))
         v_r = float(ref.v)
@@ -153,7 +201,7 @@ def test_error_jacobian_exact_form_and_identities():
         q = np.array([rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-3, 3)])
         q_r = q + np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1.5, 1.5)])  # no wrap nearby
         error = np.asarray(posture_error(*q, *q_r))
-        d = central_difference(lambda p: posture_error(*p, *q_r), q, 1e-6)
+        d = central_difference(lambda p, q_r=q_r: posture_error(*p, *q_r), q, 1e-6)
         c, s = np.cos(q[2]), np.sin(q[2])
         exact = np.array([[-c, -s, error[1]], [s, -c, -error[0]], [0.0, 0.0, -1.0]])
         # h = 1e-6: truncation ~h^2 |q_r - q| ~ 1e-12, rounding ~eps |q| / h ~ 1e-9
@@ -202,8 +250,9 @@ def test_cost_gradient_equals_the_closed_form():
 def _one_step_case(rng):
     q = np.array([rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(-3, 3)])
     q_r = q + np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(-0.4, 0.4)])
-    ref = Reference(*(jnp.asarray(v) for v in (q_r[0], q_r[1], q_r[2], rng.uniform(0.2, 1.0),
-                                                 rng.uniform(-0.5, 0.5), 0.0, 0.0)))
+    ref = Reference(
+        *(jnp.asarray(v) for v in (q_r[0], q_r[1], q_r[2], rng.uniform(0.2, 1.0), rng.uniform(-0.5, 0.5), 0.0, 0.0))
+    )
     q_r_next = q_r + TC * np.asarray(body_basis(q_r[2])) @ np.array([float(ref.v), float(ref.omega)])
     gains = rng.uniform([0.5, 20.0, 5.0], [5.0, 100.0, 30.0])
     gamma = np.array([1.0, 50.0, 1.0])
@@ -254,8 +303,9 @@ def _one_step_gradient(step, sensitivity, alpha, q, ref, q_r_next, gamma, model)
 def _check_one_step(step, sensitivity, model, rng, h: float = 1e-6):
     q, ref, q_r_next, gains, gamma = (jax.tree_util.tree_map(jnp.asarray, x) for x in _one_step_case(rng))
     analytic = np.asarray(_one_step_gradient(step, sensitivity, gains, q, ref, q_r_next, gamma, model))
-    fd = central_difference(lambda a: float(_one_step_cost(step, jnp.asarray(a), q, ref, q_r_next, gamma, model)),
-                            np.asarray(gains), h)
+    fd = central_difference(
+        lambda a: float(_one_step_cost(step, jnp.asarray(a), q, ref, q_r_next, gamma, model)), np.asarray(gains), h
+    )
     # SPEC 6.18: relative 1e-5 (prototype 5.8e-6); scaled by the largest entry so a near-zero one passes
     np.testing.assert_allclose(analytic, fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(analytic)))
     # reverse-mode AD of the same one-step cost: the chain rule is the same, only rounding differs
@@ -300,7 +350,7 @@ def test_only_along_track_error_raises_only_kx():
 
 
 def test_kx_never_decreases_with_the_analytic_jacobian(line):
-    nn, setup, result = run_line("controller.jacobian=\"analytic\"", identification=line["identification"])
+    nn, _setup, result = run_line('controller.jacobian="analytic"', identification=line["identification"])
     assert result.status_name == "ok"
     assert np.all(np.diff(nn["kx"]) >= 0.0)
     # and it did adapt (not a frozen gain)
@@ -319,7 +369,7 @@ def _clipped_run(line, freeze_time: float):
     """Rates far above the defaults and narrow bounds, so the per-step clip and the box both bind."""
     overrides = ["controller.rates=[1e5, 1e8, 1e7]", f"controller.freeze_time={freeze_time}"]
     overrides += [f"controller.{k}={list(v)}" for k, v in BOUNDS.items()]
-    nn, setup, result = run_line(*overrides, identification=line["identification"])
+    nn, _setup, result = run_line(*overrides, identification=line["identification"])
     assert result.status_name == "ok"
     return nn
 
@@ -396,8 +446,10 @@ def test_identified_jacobian_matches_the_one_step_coefficient(identified, z):
     c_nom = float(one_step_coefficient(jnp.asarray(10.0), TC))
     c_v = float(one_step_coefficient(jnp.asarray(10.0 * nominal.mass / true_plant.mass), TC))
     c_w = float(one_step_coefficient(jnp.asarray(10.0 * nominal.inertia_axle / true_plant.inertia_axle), TC))
-    jac = {name: np.asarray(input_jacobian(r.emulator.mlp, r.emulator.scales, jnp.asarray(z)))
-           for name, r in identified.items()}
+    jac = {
+        name: np.asarray(input_jacobian(r.emulator.mlp, r.emulator.scales, jnp.asarray(z)))
+        for name, r in identified.items()
+    }
     # SPEC 6.24: within 25 % of c(k_c), resp. c(k_c m_hat/m) and c(k_c I_A_hat/I_A)
     assert jac["nominal"][0, 0] == pytest.approx(c_nom, rel=0.25)
     assert jac["nominal"][2, 1] == pytest.approx(c_nom, rel=0.25)
@@ -411,8 +463,9 @@ def test_identified_jacobian_matches_the_one_step_coefficient(identified, z):
 
 def test_one_step_coefficient():
     # SPEC 3.4: k = 10, T_c = 0.01 gives 4.84e-4; closed form T - (1 - e^{-kT})/k evaluated in numpy
-    assert float(one_step_coefficient(jnp.asarray(10.0), 0.01)) == pytest.approx(0.01 - (1 - np.exp(-0.1)) / 10,
-                                                                                 rel=1e-12)
+    assert float(one_step_coefficient(jnp.asarray(10.0), 0.01)) == pytest.approx(
+        0.01 - (1 - np.exp(-0.1)) / 10, rel=1e-12
+    )
     assert float(one_step_coefficient(jnp.asarray(10.0), 0.01)) == pytest.approx(4.84e-4, abs=5e-7)
     # small k T: c -> k T^2 / 2 (the next term is -k^2 T^3 / 6, relative kT/3 = 3.3e-4 here)
     assert float(one_step_coefficient(jnp.asarray(0.1), 0.01)) == pytest.approx(0.1 * 0.01**2 / 2, rel=1e-3)
@@ -433,13 +486,24 @@ def _one_control_step(previous_saturated: float):
     mlp = mlp.__class__(mlp.w1, 0.2 * jax.random.normal(k2, (20,)), mlp.w2, 0.2 * jax.random.normal(k3, (3,)))
     velocity = jax.tree_util.tree_map(lambda w: 1e-3 * jnp.ones_like(w), mlp)
     controller = NNAdaptiveBackstepping(
-        gains=(1.0, 55.0, 15.0), emulator=Emulator(mlp, scales, True), control_period=TC,
-        analytic_coefficients=one_step_coefficient(jnp.asarray([10.0, 8.0]), TC), rates=(300.0, 2e4, 5e3),
-        gain_momentum=0.3, leakage=0.5)
+        gains=(1.0, 55.0, 15.0),
+        emulator=Emulator(mlp, scales, True),
+        control_period=TC,
+        analytic_coefficients=one_step_coefficient(jnp.asarray([10.0, 8.0]), TC),
+        rates=(300.0, 2e4, 5e3),
+        gain_momentum=0.3,
+        leakage=0.5,
+    )
     memory = AdaptiveMemory(
-        gains=jnp.asarray([1.2, 60.0, 14.0]), last_step=jnp.asarray([0.01, -0.2, 0.05]), mlp=mlp, mlp_velocity=velocity,
-        previous_pose=jnp.asarray([1.0, 2.0, 0.7]), previous_input=jnp.asarray([0.52, 0.1, 0.5, 0.08]),
-        previous_saturated=jnp.asarray(previous_saturated), started=jnp.asarray(1.0))
+        gains=jnp.asarray([1.2, 60.0, 14.0]),
+        last_step=jnp.asarray([0.01, -0.2, 0.05]),
+        mlp=mlp,
+        mlp_velocity=velocity,
+        previous_pose=jnp.asarray([1.0, 2.0, 0.7]),
+        previous_input=jnp.asarray([0.52, 0.1, 0.5, 0.08]),
+        previous_saturated=jnp.asarray(previous_saturated),
+        started=jnp.asarray(1.0),
+    )
     y = jnp.asarray([1.0038, 2.0033, 0.7009, 0.505, 0.09])
     ref = Reference(*(jnp.asarray(v) for v in (1.09, 1.98, 0.75, 0.5, 0.1, 0.0, 0.0)))
     command, new_memory, logs = _command(controller, jnp.asarray(5.0), y, ref, memory)
@@ -453,16 +517,25 @@ def test_one_control_step_follows_the_pseudo_code():
     scales = controller.emulator.scales
     z_prev = memory.previous_input / scales.inputs
     target = body_increment(memory.previous_pose, y[:3]) / scales.outputs
-    trained, velocity = momentum_step(memory.mlp, memory.mlp_velocity, backprop(memory.mlp, z_prev, target),
-                                      learning_rate=0.2, momentum=0.3, clip_norm=5.0)
+    trained, velocity = momentum_step(
+        memory.mlp,
+        memory.mlp_velocity,
+        backprop(memory.mlp, z_prev, target),
+        learning_rate=0.2,
+        momentum=0.3,
+        clip_norm=5.0,
+    )
     error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
     assert float(jnp.hypot(error[0], error[1])) < 0.5  # the gate is open
     nu_c_now = kanayama_command(error, ref, memory.gains)  # well inside the clamps here
     c_v = float(one_step_coefficient(jnp.asarray(10.0), TC))
     jb = input_jacobian(trained, scales, jnp.concatenate([nu_c_now, y[3:5]]))[:, :2] / c_v
     gradient = cost_gradient(error, ref, jnp.asarray([1.0, 50.0, 1.0]), jb, True)
-    step = (-TC * jnp.asarray([300.0, 2e4, 5e3]) * gradient + 0.3 * memory.last_step
-            - TC * 0.5 * (memory.gains - jnp.asarray([1.0, 55.0, 15.0])))
+    step = (
+        -TC * jnp.asarray([300.0, 2e4, 5e3]) * gradient
+        + 0.3 * memory.last_step
+        - TC * 0.5 * (memory.gains - jnp.asarray([1.0, 55.0, 15.0]))
+    )
     step = np.clip(np.asarray(step), -np.asarray([0.05, 5.0, 0.5]), [0.05, 5.0, 0.5])
     # the step is a real one: not all zero, not all clipped
     assert np.all(np.abs(step) > 1e-4) and np.any(np.abs(step) < [0.05, 5.0, 0.5])
@@ -470,10 +543,8 @@ def test_one_control_step_follows_the_pseudo_code():
     # the same operations in the same order: rounding only
     tol = {"rtol": 1e-12, "atol": 1e-15}
     np.testing.assert_allclose(logs["emulator_loss"], sample_loss(memory.mlp, z_prev, target), **tol)
-    np.testing.assert_allclose(ravel_pytree(new_memory.mlp)[0],
-                               ravel_pytree(trained)[0], **tol)
-    np.testing.assert_allclose(ravel_pytree(new_memory.mlp_velocity)[0],
-                               ravel_pytree(velocity)[0], **tol)
+    np.testing.assert_allclose(ravel_pytree(new_memory.mlp)[0], ravel_pytree(trained)[0], **tol)
+    np.testing.assert_allclose(ravel_pytree(new_memory.mlp_velocity)[0], ravel_pytree(velocity)[0], **tol)
     np.testing.assert_allclose([logs["jacobian_v"], logs["jacobian_omega"]], [jb[0, 0], jb[2, 1]], **tol)
     assert float(logs["gate"]) == 1.0
     np.testing.assert_allclose(new_memory.gains, gains, **tol)
@@ -486,7 +557,7 @@ def test_one_control_step_follows_the_pseudo_code():
 
 
 def test_no_gain_change_after_a_saturated_period():
-    controller, memory, y, ref, command, new_memory, logs = _one_control_step(previous_saturated=1.0)
+    _controller, memory, _y, _ref, _command, new_memory, logs = _one_control_step(previous_saturated=1.0)
     assert float(logs["gate"]) == 0.0
     np.testing.assert_array_equal(new_memory.gains, memory.gains)
     np.testing.assert_array_equal(new_memory.last_step, 0.0)
@@ -523,8 +594,9 @@ def test_emulator_loss_is_finite_and_small_after_the_transient(line):
     assert np.all(np.isfinite(nn["jacobian_v"])) and np.all(np.isfinite(nn["jacobian_omega"]))
 
 
-@pytest.mark.parametrize("override", ["controller.emulator=\"E0\"", "controller.error_jacobian=\"paper\""],
-                         ids=["E0", "paper_error_jacobian"])
+@pytest.mark.parametrize(
+    "override", ['controller.emulator="E0"', 'controller.error_jacobian="paper"'], ids=["E0", "paper_error_jacobian"]
+)
 def test_options_run_and_adapt(line, override):
     identification = None if "E0" in override else line["identification"]
     nn, setup, result = run_line(override, identification=identification)
@@ -574,8 +646,9 @@ def test_model_jacobian_on_the_nominal_model_is_the_sampled_data_coefficient():
     gains = np.asarray([10.0, 8.0])
     assert jacobian[0, 0] == pytest.approx(gains[0] * TC**2 / 2, rel=1e-9)
     assert jacobian[2, 1] == pytest.approx(gains[1] * TC**2 / 2, rel=1e-2)
-    np.testing.assert_allclose([jacobian[0, 0], jacobian[2, 1]], one_step_coefficient(jnp.asarray(gains), TC),
-                               rtol=0.05)
+    np.testing.assert_allclose(
+        [jacobian[0, 0], jacobian[2, 1]], one_step_coefficient(jnp.asarray(gains), TC), rtol=0.05
+    )
     assert abs(jacobian[1, 0]) < 1e-12 and abs(jacobian[0, 1]) < 1e-12
 
 
@@ -597,8 +670,9 @@ def test_mode_b_one_step_sensitivity_gives_the_mode_a_gradient():
     sigma = sensitivity_step(jnp.zeros((3, 3)), y, ref, gains, jb, 4.8e-4, TC)
     np.testing.assert_allclose(sigma, rotation(y[2]) @ jb @ gain_sensitivity(error, ref), atol=1e-15)
     for exact in (True, False):
-        np.testing.assert_allclose(sensitivity_gradient(error, y, gamma, sigma, exact),
-                                   cost_gradient(error, ref, gamma, jb, exact), rtol=1e-12)
+        np.testing.assert_allclose(
+            sensitivity_gradient(error, y, gamma, sigma, exact), cost_gradient(error, ref, gamma, jb, exact), rtol=1e-12
+        )
     # and the transition carries Sigma on: a second step from the same pose adds (I + ...) Sigma
     twice = sensitivity_step(sigma, y, ref, gains, jb, 4.8e-4, TC)
     assert not np.allclose(twice, 2 * sigma) and np.all(np.isfinite(twice))

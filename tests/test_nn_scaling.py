@@ -1,6 +1,7 @@
 """The NN-adaptive controller on robots slower than the paper's: its identification must stay inside the
 clamps (scaled by the robot's limits), the paper's robot must be unchanged, and a run whose adaptation
 could not work must say so (``adaptation_warnings``)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -52,8 +53,20 @@ def test_paper_robot_identification_is_bit_identical():
     key = ddtrack.runner.controller_keys(spec.simulation.seed)[1]
 
     def unscaled(plant, inner, emulator, key, disturbance, noise):  # identify's SPEC defaults: no reference scale
-        return identify(plant, inner, emulator, key, duration=2.0, epochs=3, control_period=0.01, substeps=10,
-                        gains=(1.0, 55.0, 15.0), limits=(2.0, 4.0), disturbance=disturbance, noise=noise)
+        return identify(
+            plant,
+            inner,
+            emulator,
+            key,
+            duration=2.0,
+            epochs=3,
+            control_period=0.01,
+            substeps=10,
+            gains=(1.0, 55.0, 15.0),
+            limits=(2.0, 4.0),
+            disturbance=disturbance,
+            noise=noise,
+        )
 
     inputs = (bare.plant_params, bare.controller.inner, emulator, key, bare.disturbance, bare.noise)
     expected = jax.tree_util.tree_map(lambda leaf: leaf[0], vmap_runs(unscaled)(*stack([inputs])))
@@ -69,8 +82,11 @@ def test_burger_identifies_and_adapts(rate):
     controller did no better than backstepping (20 Hz) or worse (10 Hz). Scaled, each output predicts within
     NMSE 0.2 (measured below 0.01) and every seed beats backstepping by a clear margin (measured 52 % to 55 %;
     before: -226 % to +5 %)."""
-    overrides = [f"simulation.control_period={1 / rate!r}", f"simulation.substeps={1000 // rate}",
-                 'randomize.mass={distribution="uniform", relative=0.2}']  # a different true mass per seed
+    overrides = [
+        f"simulation.control_period={1 / rate!r}",
+        f"simulation.substeps={1000 // rate}",
+        'randomize.mass={distribution="uniform", relative=0.2}',
+    ]  # a different true mass per seed
     seeds = [0, 1]
     errors = {}
     for kind in ("backstepping", NN):
@@ -86,8 +102,15 @@ def test_burger_identifies_and_adapts(rate):
 @pytest.mark.slow
 def test_burger_run_has_no_adaptation_warning():
     """The shipped scenario, shortened: identified and adapting, so no warning."""
-    spec = ddtrack.load_scenario(BURGER, overrides=["simulation.duration=5.0", "simulation.metric_window=[0, 5]",
-                                                    "controller.identification_duration=20.0", "controller.epochs=30"])
+    spec = ddtrack.load_scenario(
+        BURGER,
+        overrides=[
+            "simulation.duration=5.0",
+            "simulation.metric_window=[0, 5]",
+            "controller.identification_duration=20.0",
+            "controller.epochs=30",
+        ],
+    )
     setup, draws = prepare(spec)
     nmse = np.asarray(setup.identification.nmse)
     columns = ddtrack.timeseries(run_setup(spec, setup, draws))
@@ -97,8 +120,13 @@ def test_burger_run_has_no_adaptation_warning():
 def _columns(n: int = 100, gate_open: float = 1.0, gain_change: float = 0.1) -> dict:
     t = np.arange(n) * 0.05
     ramp = np.linspace(0.0, gain_change, n)
-    return {"t": t, "gate": (np.arange(n) < gate_open * n).astype(float),
-            "kx": 1.0 * (1 + ramp), "ky": 55.0 * (1 + ramp), "ktheta": 15.0 * (1 - ramp)}
+    return {
+        "t": t,
+        "gate": (np.arange(n) < gate_open * n).astype(float),
+        "kx": 1.0 * (1 + ramp),
+        "ky": 55.0 * (1 + ramp),
+        "ktheta": 15.0 * (1 - ramp),
+    }
 
 
 def test_warnings_fire_on_a_failing_adaptation():
@@ -116,7 +144,7 @@ def test_warnings_silent_on_a_working_adaptation():
 
 def test_warnings_follow_the_controller_config():
     """A model Jacobian does not use the network; zero rates are a chosen non-adaptation."""
-    model = ddtrack.load_scenario(LINE, controller=NN, overrides=["controller.jacobian=\"model\""]).controller
+    model = ddtrack.load_scenario(LINE, controller=NN, overrides=['controller.jacobian="model"']).controller
     assert adaptation_warnings(model, _columns(), nmse=(5.0, 5.0, 5.0)) == []
     frozen = ddtrack.load_scenario(LINE, controller=NN, overrides=["controller.rates=[0, 0, 0]"]).controller
     assert adaptation_warnings(frozen, _columns(gain_change=0.0)) == []

@@ -5,6 +5,7 @@ The driver killed at random moments and resumed is `bench/kill_resume.py` (and, 
 tests/test_sweep.py::test_resume_after_sigkill); a run folder under a regular file is
 tests/test_cli.py::test_unwritable_output_fails_before_simulating.
 """
+
 from __future__ import annotations
 
 import errno
@@ -15,10 +16,10 @@ import uuid
 from pathlib import Path
 
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack.mc
 import ddtrack.runner
-from conftest import SCENARIOS
 from ddtrack import outdir, sweep
 from ddtrack.errors import RunError
 
@@ -161,8 +162,9 @@ def mount(tmp_path):
         options = f"size={size}" + (",ro" if read_only else "")
         if shutil.which("mount") is None:
             pytest.skip("no mount command")
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)], capture_output=True,
-                              text=True)
+        done = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)], capture_output=True, text=True
+        )
         if done.returncode != 0:
             pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip() or done.returncode})")
         mounted.append(folder)
@@ -188,8 +190,9 @@ def refuse_to_simulate(*args, **kwargs):
     raise AssertionError("simulated although the output folder cannot be written")
 
 
-@pytest.mark.parametrize("command", [("run", SCENARIOS / "paper_line.toml"),
-                                     ("mc", SCENARIOS / "paper_line.toml", "-n", "2")])
+@pytest.mark.parametrize(
+    "command", [("run", SCENARIOS / "paper_line.toml"), ("mc", SCENARIOS / "paper_line.toml", "-n", "2")]
+)
 def test_read_only_output_fails_before_simulating(mount, cli, monkeypatch, command):
     monkeypatch.setattr(ddtrack.runner, "run_setup", refuse_to_simulate)
     monkeypatch.setattr(ddtrack.mc, "run_specs", refuse_to_simulate)

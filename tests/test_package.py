@@ -1,4 +1,5 @@
 """Package-wide properties: the import layering, float64 outputs, determinism, docstrings, README vs CI."""
+
 from __future__ import annotations
 
 import ast
@@ -10,9 +11,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import ROOT, SCENARIOS
 
 import ddtrack
-from conftest import ROOT, SCENARIOS
 
 PACKAGE = ROOT / "src" / "ddtrack"
 
@@ -34,6 +35,8 @@ LAYERS = [
     {"cluster"},
     {"cli"},
 ]
+
+
 def _short(seconds: int) -> list[str]:
     """Overrides that shorten a shipped scenario (its metric window must shrink with it)."""
     return [f"simulation.duration={seconds}", f"simulation.metric_window=[0, {seconds}]"]
@@ -82,8 +85,9 @@ def test_the_simulator_never_imports_a_concrete_controller():
 def test_every_output_array_is_float64():
     scenario = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*_short(1)])
     result = ddtrack.run(scenario)
-    leaves = jax.tree_util.tree_leaves((result.t, result.state, result.reference, result.error, result.control,
-                                        result.logs))
+    leaves = jax.tree_util.tree_leaves(
+        (result.t, result.state, result.reference, result.error, result.control, result.logs)
+    )
     assert len(leaves) > 15
     for leaf in leaves:
         assert leaf.dtype == jnp.float64, leaf.dtype
@@ -111,8 +115,7 @@ def test_parameter_draws_follow_the_seed_and_leave_the_rest_alone():
 
 def test_swapping_the_controller_keeps_the_random_draws():
     scenario = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*_short(2)])
-    other = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml",
-                                  overrides=[*_short(2), "controller.inner=pd"])
+    other = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*_short(2), "controller.inner=pd"])
     (_, draws_a), (_, draws_b) = ddtrack.prepare(scenario, seed=1), ddtrack.prepare(other, seed=1)
     assert np.array_equal(draws_a.disturbance, draws_b.disturbance) and np.array_equal(draws_a.noise, draws_b.noise)
 
@@ -124,9 +127,13 @@ def test_every_shipped_scenario_runs(path):
     result = ddtrack.run(scenario)
     assert result.status_name == "ok"
     columns = ddtrack.timeseries(result)
-    metrics = ddtrack.summarize(columns, status=result.status_name, window=scenario.simulation.window,
-                                control_period=scenario.simulation.control_period,
-                                settling_threshold=scenario.simulation.settling_threshold)
+    metrics = ddtrack.summarize(
+        columns,
+        status=result.status_name,
+        window=scenario.simulation.window,
+        control_period=scenario.simulation.control_period,
+        settling_threshold=scenario.simulation.settling_threshold,
+    )
     assert metrics["e_tr_mean"] < 0.2, metrics  # every shipped case is tracked, under its uncertainty
 
 
@@ -137,8 +144,9 @@ def test_public_api_is_documented():
 
 
 def _is_protocol(node: ast.ClassDef) -> bool:
-    return any(isinstance(base, (ast.Name, ast.Subscript)) and ast.unparse(base).startswith("Protocol")
-               for base in node.bases)
+    return any(
+        isinstance(base, (ast.Name, ast.Subscript)) and ast.unparse(base).startswith("Protocol") for base in node.bases
+    )
 
 
 def test_every_public_function_and_class_has_a_docstring():
@@ -153,8 +161,11 @@ def test_every_public_function_and_class_has_a_docstring():
             if not ast.get_docstring(node):
                 missing.append(f"{where}:{node.lineno} {node.name}")
             if isinstance(node, ast.ClassDef) and _is_protocol(node):
-                missing += [f"{where}:{m.lineno} {node.name}.{m.name}" for m in node.body
-                            if isinstance(m, ast.FunctionDef) and not m.name.startswith("_") and not ast.get_docstring(m)]
+                missing += [
+                    f"{where}:{m.lineno} {node.name}.{m.name}"
+                    for m in node.body
+                    if isinstance(m, ast.FunctionDef) and not m.name.startswith("_") and not ast.get_docstring(m)
+                ]
     assert missing == [], "no docstring: " + ", ".join(missing)
 
 
@@ -169,8 +180,9 @@ def test_the_public_api_has_numpydoc_sections():
         obj = getattr(ddtrack, name)
         doc = inspect.getdoc(obj)
         try:
-            parameters = [p for p in inspect.signature(obj).parameters.values()
-                          if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+            parameters = [
+                p for p in inspect.signature(obj).parameters.values() if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+            ]
         except ValueError:  # an exception class without its own __init__
             parameters = []
         if inspect.isclass(obj):

@@ -1,5 +1,6 @@
 """The README's tour matches what the commands print: every ``$ ddtrack ...`` line of a ``console`` block that shows
 output is run, in order, in a scratch folder, and its output compared line by line ("..." stands for any text)."""
+
 from __future__ import annotations
 
 import re
@@ -9,7 +10,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from conftest import ROOT
 
 DDTRACK = Path(sys.executable).with_name("ddtrack")  # the console script installed beside this interpreter
@@ -49,6 +49,8 @@ def test_the_readme_tour_prints_what_the_readme_shows(tmp_path):
         done = subprocess.run([str(DDTRACK), *argv[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, f"{command}\n{done.stderr}"
         actual = done.stdout.rstrip("\n").splitlines()
-        assert len(actual) == len(expected), f"{command}: README shows\n" + "\n".join(expected) + "\nit printed\n" + done.stdout
+        assert len(actual) == len(expected), (
+            f"{command}: README shows\n" + "\n".join(expected) + "\nit printed\n" + done.stdout
+        )
         for want, got in zip(expected, actual, strict=True):
             assert matches(want, got), f"{command}: README shows\n{want}\nit printed\n{got}"

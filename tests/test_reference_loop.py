@@ -16,6 +16,7 @@ Tolerance 1e-9 throughout: both sides do the same float64 arithmetic up to reass
 per operation, ~1e-15 relative), and the closed loop is contracting, so the accumulated difference stays
 many orders below 1e-9 (measured: <= 2e-13 over 22 s) unless a formula differs.
 """
+
 from __future__ import annotations
 
 import math
@@ -41,8 +42,15 @@ def wrap(angle: float) -> float:
 
 def line_reference(t, *, speed, start, heading):
     """SPEC 4.2: constant speed along a fixed heading; omega_r = v_r_dot = omega_r_dot = 0."""
-    return (start[0] + speed * t * math.cos(heading), start[1] + speed * t * math.sin(heading), heading,
-            speed, 0.0, 0.0, 0.0)
+    return (
+        start[0] + speed * t * math.cos(heading),
+        start[1] + speed * t * math.sin(heading),
+        heading,
+        speed,
+        0.0,
+        0.0,
+        0.0,
+    )
 
 
 def square_reference(t, *, corner, side, speed):
@@ -64,7 +72,7 @@ def square_reference(t, *, corner, side, speed):
 
 def plant_rates(state, tau_r, tau_l, dist_r, dist_l, p):
     """SPEC 1.3, scalar form. p: mass, inertia (I_C), d, R, L, b_w, tau_c, eps."""
-    x, y, th, v, w = state
+    _x, _y, th, v, w = state
     m, i_c, d, r, half, b_w, tau_c, eps = p
     i_a = i_c + m * d * d
     phi_r, phi_l = (v + half * w) / r, (v - half * w) / r
@@ -79,10 +87,10 @@ def rk4_period(state, tau, dist, p, period, substeps):
     h = period / substeps
     for _ in range(substeps):
         k1 = plant_rates(state, *tau, *dist, p)
-        k2 = plant_rates([s + 0.5 * h * k for s, k in zip(state, k1)], *tau, *dist, p)
-        k3 = plant_rates([s + 0.5 * h * k for s, k in zip(state, k2)], *tau, *dist, p)
-        k4 = plant_rates([s + h * k for s, k in zip(state, k3)], *tau, *dist, p)
-        state = [s + h / 6.0 * (a + 2.0 * b + 2.0 * c + e) for s, a, b, c, e in zip(state, k1, k2, k3, k4)]
+        k2 = plant_rates([s + 0.5 * h * k for s, k in zip(state, k1, strict=True)], *tau, *dist, p)
+        k3 = plant_rates([s + 0.5 * h * k for s, k in zip(state, k2, strict=True)], *tau, *dist, p)
+        k4 = plant_rates([s + h * k for s, k in zip(state, k3, strict=True)], *tau, *dist, p)
+        state = [s + h / 6.0 * (a + 2.0 * b + 2.0 * c + e) for s, a, b, c, e in zip(state, k1, k2, k3, k4, strict=True)]
     return state
 
 
@@ -104,8 +112,7 @@ def control(state, ref, gains, kc, nominal, v_max, w_max, tau_max):
     de_y = -w * e_x + v_r * math.sin(e_th)
     de_th = w_r - w
     v_c_dot = v_r_dot * math.cos(e_th) - v_r * math.sin(e_th) * de_th + kx * de_x
-    w_c_dot = (w_r_dot + v_r_dot * (ky * e_y + kth * math.sin(e_th))
-               + v_r * (ky * de_y + kth * math.cos(e_th) * de_th))
+    w_c_dot = w_r_dot + v_r_dot * (ky * e_y + kth * math.sin(e_th)) + v_r * (ky * de_y + kth * math.cos(e_th) * de_th)
     saturated = False
     if abs(v_c) > v_max:
         v_c, v_c_dot, saturated = math.copysign(v_max, v_c), 0.0, True
@@ -125,15 +132,35 @@ def control(state, ref, gains, kc, nominal, v_max, w_max, tau_max):
 
 def reference_loop(reference, x0, n_steps, *, period, substeps, gains, kc, nominal, plant, limits, disturbance):
     """The whole loop; ``disturbance(t) -> (tau_dR, tau_dL)``. Returns rows like ddtrack.timeseries."""
-    rows = {k: [] for k in ("t", "x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "e_x", "e_y",
-                            "e_theta", "v_cmd", "omega_cmd", "tau_r", "tau_l", "saturated")}
+    rows = {
+        k: []
+        for k in (
+            "t",
+            "x",
+            "y",
+            "theta",
+            "v",
+            "omega",
+            "x_ref",
+            "y_ref",
+            "theta_ref",
+            "e_x",
+            "e_y",
+            "e_theta",
+            "v_cmd",
+            "omega_cmd",
+            "tau_r",
+            "tau_l",
+            "saturated",
+        )
+    }
     state = list(x0)
     for k in range(n_steps):
         t = k * period
         ref = reference(t)
         e, tau_r, tau_l, v_c, w_c, saturated = control(state, ref, gains, kc, nominal, *limits)
         tau_r, tau_l = max(-plant[-1], min(plant[-1], tau_r)), max(-plant[-1], min(plant[-1], tau_l))  # the motor
-        for name, value in zip(rows, (t, *state, *ref[:3], *e, v_c, w_c, tau_r, tau_l, float(saturated))):
+        for name, value in zip(rows, (t, *state, *ref[:3], *e, v_c, w_c, tau_r, tau_l, float(saturated)), strict=True):
             rows[name].append(value)
         state = rk4_period(state, (tau_r, tau_l), disturbance(t), plant[:-1], period, substeps)
     rows = {k: np.asarray(v) for k, v in rows.items()}
@@ -149,6 +176,7 @@ def from_scenario(scenario, n_steps, *, with_disturbance=True):
     plant = scenario.plant_params()  # [plant] over [robot]
     traj = scenario.trajectory
     if traj.kind == "line":
+
         def reference(t):
             return line_reference(t, speed=traj.speed, start=traj.start, heading=traj.heading)
     else:
@@ -156,31 +184,65 @@ def from_scenario(scenario, n_steps, *, with_disturbance=True):
 
         def reference(t):
             return square_reference(t, corner=traj.corner, side=traj.side, speed=traj.speed)
+
     dist = scenario.disturbance
     assert dist.kind == "sinusoid"
 
     def disturbance(t):
         if not with_disturbance:
             return 0.0, 0.0
-        return tuple(b + a * math.sin(dist.frequency * t + ph)
-                     for b, a, ph in zip(dist.bias, dist.amplitude, dist.phase))
+        return tuple(
+            b + a * math.sin(dist.frequency * t + ph)
+            for b, a, ph in zip(dist.bias, dist.amplitude, dist.phase, strict=True)
+        )
 
     if scenario.initial.pose is not None:
         pose = scenario.initial.pose
     else:
         pose = reference(0.0)[:3]
     return reference_loop(
-        reference, [*pose, *scenario.initial.velocity], n_steps, period=sim.control_period, substeps=sim.substeps,
-        gains=ctrl.gains, kc=ctrl.kc,
+        reference,
+        [*pose, *scenario.initial.velocity],
+        n_steps,
+        period=sim.control_period,
+        substeps=sim.substeps,
+        gains=ctrl.gains,
+        kc=ctrl.kc,
         nominal=(robot.mass, robot.inertia, robot.com_offset, robot.wheel_radius, robot.half_axle),
-        plant=(plant.mass, plant.inertia, plant.com_offset, plant.wheel_radius, plant.half_axle,
-               plant.viscous_friction, plant.coulomb_friction, plant.friction_smoothing, plant.max_torque),
-        limits=(ctrl.max_velocity, ctrl.max_yaw_rate, robot.max_torque), disturbance=disturbance,
+        plant=(
+            plant.mass,
+            plant.inertia,
+            plant.com_offset,
+            plant.wheel_radius,
+            plant.half_axle,
+            plant.viscous_friction,
+            plant.coulomb_friction,
+            plant.friction_smoothing,
+            plant.max_torque,
+        ),
+        limits=(ctrl.max_velocity, ctrl.max_yaw_rate, robot.max_torque),
+        disturbance=disturbance,
     )
 
 
-COMPARED = ("x", "y", "theta", "v", "omega", "x_ref", "y_ref", "theta_ref", "e_x", "e_y", "e_theta", "e_tr",
-            "v_cmd", "omega_cmd", "tau_r", "tau_l")
+COMPARED = (
+    "x",
+    "y",
+    "theta",
+    "v",
+    "omega",
+    "x_ref",
+    "y_ref",
+    "theta_ref",
+    "e_x",
+    "e_y",
+    "e_theta",
+    "e_tr",
+    "v_cmd",
+    "omega_cmd",
+    "tau_r",
+    "tau_l",
+)
 
 
 def assert_same_run(ours, theirs, n):
@@ -191,8 +253,9 @@ def assert_same_run(ours, theirs, n):
 
 
 def load(name, duration):
-    return ddtrack.load_scenario(SCENARIOS / name, overrides=[f"simulation.duration={duration}",
-                                                               f"simulation.metric_window=[0.0, {duration}]"])
+    return ddtrack.load_scenario(
+        SCENARIOS / name, overrides=[f"simulation.duration={duration}", f"simulation.metric_window=[0.0, {duration}]"]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -215,8 +278,10 @@ def test_paper_line_matches_reference_loop(paper_line):
     assert_same_run(ours, theirs, n)
     # the comparison covers saturated and unsaturated rows, velocity clamps and the torque limit
     assert 0 < ours["saturated"].sum() < n
-    assert np.max(np.abs(ours["tau_r"])) == scenario.robot.max_torque or \
-        np.max(np.abs(ours["tau_l"])) == scenario.robot.max_torque
+    assert (
+        np.max(np.abs(ours["tau_r"])) == scenario.robot.max_torque
+        or np.max(np.abs(ours["tau_l"])) == scenario.robot.max_torque
+    )
 
 
 def test_paper_line_disturbance_is_seen(paper_line):
@@ -233,7 +298,7 @@ def test_paper_square_matches_reference_loop_over_a_corner(paper_square):
     ours = from_scenario(scenario, n)
     assert_same_run(ours, theirs, n)
     # the corner at t = 20 s is in the run: the reference heading jumps by pi/2 and the yaw clamp acts
-    corner = int(round(20.0 / scenario.simulation.control_period))
+    corner = round(20.0 / scenario.simulation.control_period)
     assert ours["theta_ref"][corner - 1] == 0.0 and ours["theta_ref"][corner] == pytest.approx(math.pi / 2)
     assert ours["saturated"][corner] == 1.0 and ours["saturated"][:corner].sum() == 0.0
     assert np.max(np.abs(ours["e_theta"][corner:])) > 1.0

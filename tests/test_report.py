@@ -1,6 +1,7 @@
 """``ddtrack report``: one self-contained page per result folder, checked in a real headless Chromium (Debian's
 ``chromium``, driven by Playwright): it loads offline without console errors or requests, every figure has a size,
 the tables hold the folder's numbers, and strings from user files stay text (never markup, never script)."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -13,12 +14,12 @@ import tomllib
 from html.parser import HTMLParser
 from pathlib import Path
 
+import browser
 import numpy as np
 import pytest
 import tomli_w
-
-import browser
 from conftest import SCENARIOS
+
 from ddtrack.cli import main
 from ddtrack.errors import RunError
 from ddtrack.report import KINDS, decimate, detect_kind, environment, render, write_report
@@ -63,8 +64,21 @@ def run_folder(tmp_path_factory):
 def mc_folder(tmp_path_factory):
     base = tmp_path_factory.mktemp("report_mc")
     out = base / "mc"
-    assert main(["mc", str(_nn_scenario(base)), "-n", "4", "--controllers", "backstepping,nn_adaptive_backstepping",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "mc",
+                str(_nn_scenario(base)),
+                "-n",
+                "4",
+                "--controllers",
+                "backstepping,nn_adaptive_backstepping",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert main(["report", str(out)]) == 0
     return out
 
@@ -81,10 +95,19 @@ def bench_folder(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("report_bench")
     (out / "tuned.toml").write_text('[controller]\nkind = "backstepping"\ngains = [2.0, 80.0, 20.0]\n')  # no tuning
-    suite = Suite(trajectories=("line", "circle"), levels=("paper",), seeds=2, robustness_mass=(1.0, 1.5),
-                  robustness_friction=(1.0, 3.0), tune_steps=1, overrides=tuple(SHORT[:2]))
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    suite = Suite(
+        trajectories=("line", "circle"),
+        levels=("paper",),
+        seeds=2,
+        robustness_mass=(1.0, 1.5),
+        robustness_friction=(1.0, 3.0),
+        tune_steps=1,
+        overrides=tuple(SHORT[:2]),
+    )
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
         run_suite(suite, TINY_CONTROLLERS, out, client)
     write_report(out)
     return out
@@ -97,8 +120,8 @@ def reproduce_folder(tmp_path_factory):
     import matplotlib.pyplot as plt
 
     from ddtrack.reproduce import CASES, CaseResult, summarise_case
-    from ddtrack.shipped import scenario_path
     from ddtrack.scenario import load_scenario
+    from ddtrack.shipped import scenario_path
 
     out = tmp_path_factory.mktemp("report_reproduce")
     cases = {}
@@ -106,9 +129,16 @@ def reproduce_folder(tmp_path_factory):
         case = CaseResult(scenario=load_scenario(scenario_path(name)))
         for variant, level in (("backstepping", 0.05), ("nn_adaptive", 0.02)):
             case.metrics[variant] = [
-                {"status": "ok", "e_tr_mean": level * (1 + 0.1 * s + 0.05 * k), "e_tr_rms": level * 1.1,
-                 "e_tr_max": level * 2, "settling_time": 6.0 + s, "final_gains": [1.0 + s, 55.0, 15.0]}
-                for s in range(3)]
+                {
+                    "status": "ok",
+                    "e_tr_mean": level * (1 + 0.1 * s + 0.05 * k),
+                    "e_tr_rms": level * 1.1,
+                    "e_tr_max": level * 2,
+                    "settling_time": 6.0 + s,
+                    "final_gains": [1.0 + s, 55.0, 15.0],
+                }
+                for s in range(3)
+            ]
         cases[name] = summarise_case(name, case)
     table = {"seeds": 3, "ablations": False, "cases": cases, "elapsed_s": 1.0}
     (out / "table1.json").write_text(json.dumps(table, indent=2))
@@ -263,13 +293,15 @@ def test_reproduce_report_shows_table_1_beside_the_paper(reproduce_folder, chrom
 
     html = (reproduce_folder / "report.html").read_text()
     _assert_self_contained(html)
-    page, graphics = _load(chromium, reproduce_folder / "report.html",
-                           browser.screenshot_path(tmp_path, "report_reproduce.png"))
+    page, graphics = _load(
+        chromium, reproduce_folder / "report.html", browser.screenshot_path(tmp_path, "report_reproduce.png")
+    )
     assert [g["tag"] for g in graphics].count("img") == 2 and "fig-table1" in {g["id"] for g in graphics}
     assert _rows(page, "table1") == 4  # two cases x two controllers
     cells = page.locator("table#table1 tbody tr").all()
-    for row, (case, variant) in zip(cells, [(c, v) for c in PAPER_TABLE for v in ("backstepping", "nn_adaptive")],
-                                    strict=True):
+    for row, (case, variant) in zip(
+        cells, [(c, v) for c in PAPER_TABLE for v in ("backstepping", "nn_adaptive")], strict=True
+    ):
         texts = row.locator("td").all_inner_texts()
         assert texts[1] == variant and float(texts[3]) == PAPER_TABLE[case][variant]
     assert _rows(page, "gains-table") == 2 * 3  # the NN controller's final gains, per case and seed
@@ -299,8 +331,9 @@ def test_every_user_string_stays_text(tmp_path, chromium):
         assert browser_page.evaluate("document.scripts.length") == 0
         assert browser_page.evaluate("document.querySelectorAll('img:not([src^=\"data:\"])').length") == 0
         assert PAYLOAD in browser_page.locator("main").inner_text()
-        browser_page.screenshot(path=str(browser.screenshot_path(tmp_path, f"report_escaping_{folder.name}.png")),
-                                full_page=True)
+        browser_page.screenshot(
+            path=str(browser.screenshot_path(tmp_path, f"report_escaping_{folder.name}.png")), full_page=True
+        )
     toml = render(run)
     assert "&lt;script&gt;alert(1)&lt;/script&gt; x&#34;onerror=alert(1)" in toml  # file name, in the TOML <pre>
     assert environment().autoescape is True
@@ -316,10 +349,17 @@ def _payload_run(tmp_path: Path) -> Path:
     csv.parent.mkdir(parents=True, exist_ok=True)
     csv.write_text("x,y\n0,0\n1,1\n2,0\n")  # not flat: rundir's path figure fails on a flat path with a long title
     scenario = folder / "payload.toml"
-    scenario.write_text(tomli_w.dumps({
-        "name": PAYLOAD, "description": PAYLOAD, "simulation": {"duration": 2.0, "metric_window": [0.0, 2.0]},
-        "trajectory": {"kind": "waypoints", "file": f"{SCRIPT}{ONERROR}.csv", "speed": 0.5},
-        "controller": {"kind": "backstepping"}}))
+    scenario.write_text(
+        tomli_w.dumps(
+            {
+                "name": PAYLOAD,
+                "description": PAYLOAD,
+                "simulation": {"duration": 2.0, "metric_window": [0.0, 2.0]},
+                "trajectory": {"kind": "waypoints", "file": f"{SCRIPT}{ONERROR}.csv", "speed": 0.5},
+                "controller": {"kind": "backstepping"},
+            }
+        )
+    )
     out = tmp_path / "run"
     assert main(["run", str(scenario), "--out", str(out)]) == 0
     stored = tomllib.loads((out / "scenario.toml").read_text())
@@ -334,12 +374,25 @@ def _payload_mc(tmp_path: Path) -> Path:
     from ddtrack import mc
 
     def row(seed: int, error: float, gains: list[float] | None) -> dict:
-        return {"seed": seed, "status": "ok", "window": [0.0, 2.0], "e_tr_mean": error, "e_tr_rms": error,
-                "e_tr_max": 2 * error, "e_tr_final": error, "settling_time": 1.0, "effort": 3.0,
-                "saturation_fraction": 0.0, "final_gains": gains, "warnings": [{"code": "c", "message": PAYLOAD}]}
+        return {
+            "seed": seed,
+            "status": "ok",
+            "window": [0.0, 2.0],
+            "e_tr_mean": error,
+            "e_tr_rms": error,
+            "e_tr_max": 2 * error,
+            "e_tr_final": error,
+            "settling_time": 1.0,
+            "effort": 3.0,
+            "saturation_fraction": 0.0,
+            "final_gains": gains,
+            "warnings": [{"code": "c", "message": PAYLOAD}],
+        }
 
-    rows = {"backstepping": [row(s, 0.05, [1.0, 55.0, 15.0]) for s in range(3)],
-            PAYLOAD: [row(s, 0.02 + 0.001 * s, [2.0 + s, 50.0, 10.0]) for s in range(3)]}
+    rows = {
+        "backstepping": [row(s, 0.05, [1.0, 55.0, 15.0]) for s in range(3)],
+        PAYLOAD: [row(s, 0.02 + 0.001 * s, [2.0 + s, 50.0, 10.0]) for s in range(3)],
+    }
     out = tmp_path / "mc"
     mc.write(out, rows, mc.summarise(rows))
     return out
@@ -355,18 +408,41 @@ def _payload_bench(tmp_path: Path) -> Path:
     for c, controller in enumerate(("backstepping", PAYLOAD)):
         for seed in range(2):
             labels = {"study": "leaderboard", "trajectory": PAYLOAD, "level": PAYLOAD}
-            metrics = {"status": "ok", "window": [0.0, 2.0], "e_tr_mean": 0.05 / (c + 1) + 0.001 * seed,
-                       "e_tr_rms": 0.05, "e_tr_max": 0.1, "e_tr_final": 0.05, "settling_time": 1.0, "effort": 2.0,
-                       "saturation_fraction": 0.0}
-            records.append({"key": f"{c}{seed}", "configuration": {"controller": controller, "labels": labels,
-                                                                   "overrides": {"overrides": []}},
-                            "seed": seed, "status": "ok", "metrics": metrics, "error": None})
+            metrics = {
+                "status": "ok",
+                "window": [0.0, 2.0],
+                "e_tr_mean": 0.05 / (c + 1) + 0.001 * seed,
+                "e_tr_rms": 0.05,
+                "e_tr_max": 0.1,
+                "e_tr_final": 0.05,
+                "settling_time": 1.0,
+                "effort": 2.0,
+                "saturation_fraction": 0.0,
+            }
+            records.append(
+                {
+                    "key": f"{c}{seed}",
+                    "configuration": {"controller": controller, "labels": labels, "overrides": {"overrides": []}},
+                    "seed": seed,
+                    "status": "ok",
+                    "metrics": metrics,
+                    "error": None,
+                }
+            )
     out = tmp_path / "bench"
     out.mkdir()
     write_results(out, records)
     board = leaderboard({r["key"]: r for r in records}, ["backstepping", PAYLOAD])
-    summary = {"suite": {"trajectories": [PAYLOAD]}, "controllers": ["backstepping", PAYLOAD], "tuned_gains": None,
-               "runs": 4, "reused": 0, "errors": 0, "not_ok": 0, "leaderboard": board}
+    summary = {
+        "suite": {"trajectories": [PAYLOAD]},
+        "controllers": ["backstepping", PAYLOAD],
+        "tuned_gains": None,
+        "runs": 4,
+        "reused": 0,
+        "errors": 0,
+        "not_ok": 0,
+        "leaderboard": board,
+    }
     (out / "leaderboard.json").write_text(json.dumps(summary))
     return out
 
@@ -377,8 +453,16 @@ def test_identification_is_reported_when_the_folder_has_it(tmp_path):
     out = tmp_path / "run"
     assert main(["run", str(SCENARIOS / "paper_line.toml"), *_sets(*SHORT), "--out", str(out)]) == 0
     losses = [1e-3 * 0.7**k for k in range(12)]
-    (out / "identification.json").write_text(json.dumps({"samples": 400, "epochs": 12, "epoch_loss": losses,
-                                                         "nmse": {"forward": 0.01, "lateral": 0.02, "yaw": 0.03}}))
+    (out / "identification.json").write_text(
+        json.dumps(
+            {
+                "samples": 400,
+                "epochs": 12,
+                "epoch_loss": losses,
+                "nmse": {"forward": 0.01, "lateral": 0.02, "yaw": 0.03},
+            }
+        )
+    )
     html = render(out)
     page = Page(html)
     assert "fig-identification" in page.ids and page.rows("identification-table", html) == 2 + 1 + 3
@@ -449,8 +533,10 @@ def test_chromium_is_installed_only_when_missing_and_as_root(tmp_path):
     assert "needs root" in reason and calls == []
     assert browser.ensure_chromium(present, root=True, run=run, which=lambda name: None) is not None and calls == []
     assert browser.ensure_chromium(present, root=True, run=run, which=lambda name: "/usr/bin/apt-get") is None
-    assert calls == [(["apt-get", "update"], "noninteractive"), (["apt-get", "install", "-y", "chromium"],
-                                                                 "noninteractive")]
+    assert calls == [
+        (["apt-get", "update"], "noninteractive"),
+        (["apt-get", "install", "-y", "chromium"], "noninteractive"),
+    ]
     present.unlink()
 
     def failing(command, **options):

@@ -1,28 +1,37 @@
 """An output folder holds exactly one command's output: a rerun replaces it whole (nothing of the earlier run
 left behind), another command's output needs --overwrite, a folder ddtrack did not write is never touched, and a
 refusal comes before any simulation (exit code 2)."""
+
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
 import pytest
+from conftest import SCENARIOS
 
 import ddtrack.mc
 import ddtrack.runner
 from ddtrack import outdir
 from ddtrack.errors import RunError
 
-from conftest import SCENARIOS
-
 SHORT = ("--set", "simulation.duration=1.0", "--set", "simulation.metric_window=[0.0, 1.0]")
-NN_SHORT = ("--controller", "nn_adaptive_backstepping", "--set", "controller.epochs=1",
-            "--set", "controller.identification_duration=1")
+NN_SHORT = (
+    "--controller",
+    "nn_adaptive_backstepping",
+    "--set",
+    "controller.epochs=1",
+    "--set",
+    "controller.identification_duration=1",
+)
 
 
 def snapshot(folder: Path) -> dict[str, tuple[bytes, int]]:
-    return {str(p.relative_to(folder)): (p.read_bytes(), p.stat().st_mtime_ns)
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): (p.read_bytes(), p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def refuse_to_simulate(*args, **kwargs):
@@ -102,8 +111,10 @@ def test_sweep_and_bench_resume_only_their_own_study(tmp_path):
 
 def test_a_sweep_into_another_sweeps_folder_is_refused_before_any_cluster(tmp_path, cli):
     sweep_file = tmp_path / "s.toml"
-    sweep_file.write_text(f'scenario = "{SCENARIOS / "figure_eight.toml"}"\ncontrollers = ["backstepping"]\n'
-                          'seeds = 1\n[grid]\n"robot.mass" = [9.0, 10.0]\n')
+    sweep_file.write_text(
+        f'scenario = "{SCENARIOS / "figure_eight.toml"}"\ncontrollers = ["backstepping"]\n'
+        'seeds = 1\n[grid]\n"robot.mass" = [9.0, 10.0]\n'
+    )
     out = tmp_path / "out"
     outdir.start_resumable(out, command="sweep", study="some other plan", resume=False)
     before = snapshot(out)
@@ -118,6 +129,6 @@ def test_staged_folder_failing_midway_keeps_the_old_output(tmp_path):
         (stage / "tune.json").write_text("old")
     with pytest.raises(ZeroDivisionError), outdir.staged_folder(out, command="tune") as stage:
         (stage / "tune.json").write_text("new, half done")
-        1 / 0
+        raise ZeroDivisionError("a failure midway")
     assert (out / "tune.json").read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]

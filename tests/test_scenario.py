@@ -1,4 +1,5 @@
 """Scenario validation: every malformed file ends with exit code 2, a message naming the field, and no output."""
+
 from __future__ import annotations
 
 import math
@@ -9,8 +10,8 @@ import tomllib
 
 import pytest
 import tomli_w
-
 from conftest import SCENARIOS
+
 from ddtrack import ConfigError, load_scenario
 from ddtrack.scenario import Scenario, apply_override, to_toml_dict, validate_scenario
 
@@ -56,12 +57,27 @@ MALFORMED = [
     ("missing trajectory", ("trajectory",), _DELETE, "trajectory", "required"),
     ("negative speed", ("trajectory", "speed"), -0.5, "trajectory.speed", "greater than 0"),
     ("strict with pd", ("controller", "inner"), "pd", "controller.strict", "computed_torque"),
-    ("waypoints repeated", ("trajectory",), {"kind": "waypoints", "points": [[0, 0], [1, 1], [1, 1]]},
-     "trajectory.points", "repeats"),
-    ("waypoints missing file", ("trajectory",), {"kind": "waypoints", "file": "nope.csv"}, "trajectory.file",
-     "does not exist"),
-    ("randomize non-physical", ("randomize",), {"mass": {"distribution": "normal", "relative": 0.5}},
-     "randomize.mass", "non-physical"),
+    (
+        "waypoints repeated",
+        ("trajectory",),
+        {"kind": "waypoints", "points": [[0, 0], [1, 1], [1, 1]]},
+        "trajectory.points",
+        "repeats",
+    ),
+    (
+        "waypoints missing file",
+        ("trajectory",),
+        {"kind": "waypoints", "file": "nope.csv"},
+        "trajectory.file",
+        "does not exist",
+    ),
+    (
+        "randomize non-physical",
+        ("randomize",),
+        {"mass": {"distribution": "normal", "relative": 0.5}},
+        "randomize.mass",
+        "non-physical",
+    ),
 ]
 
 
@@ -73,7 +89,7 @@ def test_malformed_scenario_exits_2_naming_the_field(tmp_path, cli, case, path, 
     scenario = tmp_path / "bad.toml"
     scenario.write_text(tomli_w.dumps(data) if not _has_nonfinite(data) else _dump_nonfinite(data))
     out = tmp_path / "out"
-    code, stdout, stderr = cli("run", scenario, "--out", out)
+    code, _stdout, stderr = cli("run", scenario, "--out", out)
     assert code == 2
     assert re.match(rf"error: {re.escape(field)}(\[\d+\])*: ", stderr), stderr
     assert word in stderr
@@ -108,11 +124,14 @@ def _replace_nonfinite(node):
     return node
 
 
-@pytest.mark.parametrize(("content", "needle"), [
-    (b"name = \n", "not valid TOML"),
-    (b"name = 'x'\n\xff\xfe[robot]\n", "not UTF-8"),
-    (b"", "name: is required"),
-])
+@pytest.mark.parametrize(
+    ("content", "needle"),
+    [
+        (b"name = \n", "not valid TOML"),
+        (b"name = 'x'\n\xff\xfe[robot]\n", "not UTF-8"),
+        (b"", "name: is required"),
+    ],
+)
 def test_unreadable_files_exit_2(tmp_path, cli, content, needle):
     scenario = tmp_path / "bad.toml"
     scenario.write_bytes(content)
@@ -126,13 +145,16 @@ def test_missing_file_exits_2(tmp_path, cli):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize(("override", "field"), [
-    ("robot.mas=3", "robot.mas"),
-    ("robot.mass=-3", "robot.mass"),
-    ("robot.mass=heavy", "robot.mass"),
-    ("robot", "--set"),
-    ("name.first=1", "name"),
-])
+@pytest.mark.parametrize(
+    ("override", "field"),
+    [
+        ("robot.mas=3", "robot.mas"),
+        ("robot.mass=-3", "robot.mass"),
+        ("robot.mass=heavy", "robot.mass"),
+        ("robot", "--set"),
+        ("name.first=1", "name"),
+    ],
+)
 def test_bad_overrides_exit_2(tmp_path, cli, override, field):
     code, _, stderr = cli("run", SCENARIOS / "paper_line.toml", "--set", override, "--out", tmp_path / "out")
     assert code == 2 and stderr.startswith(f"error: {field}")
@@ -142,8 +164,12 @@ def test_bad_overrides_exit_2(tmp_path, cli, override, field):
 def test_console_script_prints_no_traceback(tmp_path):
     scenario = tmp_path / "bad.toml"
     scenario.write_text((SCENARIOS / "paper_line.toml").read_text().replace("mass = 10.0", "mass = -10.0"))
-    proc = subprocess.run([sys.executable, "-m", "ddtrack", "run", str(scenario), "--out", str(tmp_path / "o")],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "ddtrack", "run", str(scenario), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip() == "error: robot.mass: Input should be greater than 0 (got -10.0)"
 
@@ -157,8 +183,7 @@ def test_overrides_are_read_as_toml_values():
 
 
 def test_plant_defaults_to_robot_and_overrides_apply():
-    scenario = load_scenario(SCENARIOS / "paper_line.toml", overrides=["robot.half_axle=0.3", "plant.mass=15"],
-                             seed=7)
+    scenario = load_scenario(SCENARIOS / "paper_line.toml", overrides=["robot.half_axle=0.3", "plant.mass=15"], seed=7)
     plant = scenario.plant_params()
     assert plant.half_axle == 0.3 and plant.mass == 15.0 and plant.inertia == 0.70
     assert scenario.simulation.seed == 7
@@ -190,7 +215,7 @@ def test_a_waypoints_file_may_carry_comments_and_blank_lines(tmp_path):
 
 
 def test_every_section_rejects_unknown_keys():
-    for section, model in Scenario.model_fields.items():
+    for section, _model in Scenario.model_fields.items():
         if section in ("name", "description", "trajectory", "disturbance", "controller"):
             continue
         with pytest.raises(ConfigError, match=rf"^{section}\.bogus: unknown key"):
@@ -199,12 +224,29 @@ def test_every_section_rejects_unknown_keys():
 
 def test_scenario_reference_documents_every_key():
     from conftest import ROOT
-    from ddtrack.scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, InitialConfig, NoiseConfig, ParameterDraw
-    from ddtrack.scenario import RobotConfig, SimulationConfig
+
+    from ddtrack.scenario import (
+        CONTROLLERS,
+        DISTURBANCES,
+        TRAJECTORIES,
+        InitialConfig,
+        NoiseConfig,
+        ParameterDraw,
+        RobotConfig,
+        SimulationConfig,
+    )
 
     text = (ROOT / "docs" / "scenarios.md").read_text()
-    models = [SimulationConfig, RobotConfig, ParameterDraw, NoiseConfig, InitialConfig,
-              *TRAJECTORIES.values(), *DISTURBANCES.values(), *CONTROLLERS.values()]
+    models = [
+        SimulationConfig,
+        RobotConfig,
+        ParameterDraw,
+        NoiseConfig,
+        InitialConfig,
+        *TRAJECTORIES.values(),
+        *DISTURBANCES.values(),
+        *CONTROLLERS.values(),
+    ]
     for model in models:
         for key in model.model_fields:
             assert f"`{key}`" in text or key == "kind", f"{model.__name__}.{key} is not in docs/scenarios.md"

@@ -1,18 +1,26 @@
 """``ddtrack schema``: the scenario file's JSON Schema, and docs/reference.md generated from it."""
+
 from __future__ import annotations
 
 import json
 import tomllib
 
 import pytest
-
 from conftest import ROOT, SCENARIOS
-from ddtrack import load_scenario
-from ddtrack.schema import kinds, resolve, scenario_schema
-from ddtrack.scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, to_toml_dict
 
-JSON_TYPES = {"number": (int, float), "integer": (int,), "string": (str,), "boolean": (bool,), "array": (list,),
-              "object": (dict,), "null": (type(None),)}
+from ddtrack import load_scenario
+from ddtrack.scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, to_toml_dict
+from ddtrack.schema import kinds, resolve, scenario_schema
+
+JSON_TYPES = {
+    "number": (int, float),
+    "integer": (int,),
+    "string": (str,),
+    "boolean": (bool,),
+    "array": (list,),
+    "object": (dict,),
+    "null": (type(None),),
+}
 
 
 def schema_errors(schema: dict, node: dict, value, path: str = "") -> list[str]:
@@ -28,10 +36,12 @@ def schema_errors(schema: dict, node: dict, value, path: str = "") -> list[str]:
     if "anyOf" in node:
         options = [o for o in node["anyOf"] if not schema_errors(schema, o, value, path)]
         return [] if options else [f"{path}: {value!r} matches none of {node['anyOf']}"]
-    if "const" in node and value != node["const"] or "enum" in node and value not in node["enum"]:
+    if ("const" in node and value != node["const"]) or ("enum" in node and value not in node["enum"]):
         return [f"{path}: {value!r} is not allowed"]
     kind = node.get("type")
-    if kind is not None and (not isinstance(value, JSON_TYPES[kind]) or kind != "boolean" and isinstance(value, bool)):
+    if kind is not None and (
+        not isinstance(value, JSON_TYPES[kind]) or (kind != "boolean" and isinstance(value, bool))
+    ):
         return [f"{path}: {value!r} is not of type {kind}"]
     errors = []
     if kind == "object":
@@ -68,7 +78,11 @@ def test_the_schema_check_can_fail():
     raw["randomize"] = {"mass": {"distribution": "uniform", "spread": 0.2}}
     errors = schema_errors(schema, schema, raw)
     assert sorted(error.split(": ")[0] for error in errors) == [
-        "controller.gains", "randomize.mass", "robot.mas", "trajectory.kind"]
+        "controller.gains",
+        "randomize.mass",
+        "robot.mas",
+        "trajectory.kind",
+    ]
     assert "robot.mas: unknown key" in errors and "controller.gains: 2 items, expected 3" in errors
 
 
@@ -79,12 +93,16 @@ def test_schema_command_prints_the_json_schema(cli):
     assert schema == json.loads(json.dumps(scenario_schema()))
     assert schema["$schema"].endswith("2020-12/schema") and schema["title"] == "ddtrack scenario file"
     assert schema["required"] == ["name", "trajectory"] and schema["additionalProperties"] is False
-    for section, registry in (("trajectory", TRAJECTORIES), ("disturbance", DISTURBANCES),
-                              ("controller", CONTROLLERS)):
+    for section, registry in (("trajectory", TRAJECTORIES), ("disturbance", DISTURBANCES), ("controller", CONTROLLERS)):
         assert list(kinds(schema, schema["properties"][section])) == list(registry)  # one model per kind
     mass = resolve(schema, schema["properties"]["robot"])["properties"]["mass"]
-    assert mass == {"default": 10.0, "description": "Total mass m [kg].", "exclusiveMinimum": 0.0, "title": "Mass",
-                    "type": "number"}
+    assert mass == {
+        "default": 10.0,
+        "description": "Total mass m [kg].",
+        "exclusiveMinimum": 0.0,
+        "title": "Mass",
+        "type": "number",
+    }
 
 
 def test_the_committed_reference_is_what_the_command_prints(cli):

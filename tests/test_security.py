@@ -9,6 +9,7 @@ Checked elsewhere, not repeated here:
   name, controller names as table rows and plot labels, in run, mc and bench folders, checked in the HTML, the
   SVG and a real browser): tests/test_report.py::test_every_user_string_stays_text.
 """
+
 from __future__ import annotations
 
 import ast
@@ -18,8 +19,8 @@ from pathlib import Path
 
 import pytest
 import tomli_w
-
 from conftest import ROOT, SCENARIOS
+
 from ddtrack.cli import folder_name
 from ddtrack.errors import ConfigError
 from ddtrack.scenario import load_scenario
@@ -60,8 +61,9 @@ def test_results_are_never_read_with_pickle():
 
 def waypoint_scenario(folder: Path, file: str) -> Path:
     path = folder / "scenario.toml"
-    path.write_text(tomli_w.dumps({"name": "w", "simulation": {"duration": 1.0},
-                                   "trajectory": {"kind": "waypoints", "file": file}}))
+    path.write_text(
+        tomli_w.dumps({"name": "w", "simulation": {"duration": 1.0}, "trajectory": {"kind": "waypoints", "file": file}})
+    )
     return path
 
 
@@ -115,10 +117,19 @@ def test_waypoints_file_inside_the_folder_is_read(tmp_path):
     assert load_scenario(SCENARIOS / "waypoints.toml").trajectory.points is not None
 
 
-@pytest.mark.parametrize(("name", "folder"), [
-    ("../../etc", "_.._etc"), ("a/b", "a_b"), ("/abs", "_abs"), ("..", "run"), (".hidden", "hidden"),
-    ("paper_line", "paper_line"), ("<script>x</script>", "_script_x__script_"), ("é t", "__t"),
-])
+@pytest.mark.parametrize(
+    ("name", "folder"),
+    [
+        ("../../etc", "_.._etc"),
+        ("a/b", "a_b"),
+        ("/abs", "_abs"),
+        ("..", "run"),
+        (".hidden", "hidden"),
+        ("paper_line", "paper_line"),
+        ("<script>x</script>", "_script_x__script_"),
+        ("é t", "__t"),
+    ],
+)
 def test_folder_name_is_one_safe_component(name, folder):
     assert folder_name(name) == folder
     assert "/" not in folder and folder not in (".", "..", "")

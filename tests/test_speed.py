@@ -3,6 +3,7 @@ needs and whether the persistent compilation cache answers them (docs/benchmarks
 
 Not timed tests (the machine's load would decide them): each checks the cause of a slow start instead.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,8 +23,9 @@ def python(code: str, **env: str) -> str:
     """Run ``code`` in a fresh interpreter on this checkout's sources; return its stdout."""
     environment = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
     environment |= {"PYTHONPATH": str(ROOT / "src"), **env}
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=environment, capture_output=True, text=True,
-                          timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=environment, capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0, done.stderr
     return done.stdout + done.stderr
 
@@ -45,22 +47,28 @@ def test_help_and_version_load_no_heavy_library():
 def test_float64_and_the_environment_still_follow_the_import(first):
     """Whichever comes first, JAX computes in float64 and Gymnasium knows the environment."""
     second = "jax" if first == "ddtrack" else "ddtrack"
-    out = python(f"import {first}, {second}, gymnasium\n"
-                 "print(jax.numpy.ones(1).dtype, 'ddtrack/DiffDriveTracking-v0' in gymnasium.registry)")
+    out = python(
+        f"import {first}, {second}, gymnasium\n"
+        "print(jax.numpy.ones(1).dtype, 'ddtrack/DiffDriveTracking-v0' in gymnasium.registry)"
+    )
     assert out.split()[-2:] == ["float64", "True"]
 
 
 def test_names_load_on_first_use():
-    out = python("import ddtrack\nprint(all(callable(getattr(ddtrack, n)) for n in ddtrack.__all__), "
-                 "sorted(ddtrack.__all__) == sorted(n for n in dir(ddtrack) if n in ddtrack.__all__))")
+    out = python(
+        "import ddtrack\nprint(all(callable(getattr(ddtrack, n)) for n in ddtrack.__all__), "
+        "sorted(ddtrack.__all__) == sorted(n for n in dir(ddtrack) if n in ddtrack.__all__))"
+    )
     assert out.split()[-2:] == ["True", "True"]
 
 
 def compile_log(cache: Path, out: Path) -> str:
     """stderr of a short ``ddtrack run`` (the console entry point, fast exit included) logging its compiles."""
-    code = ("import sys; from ddtrack.cli import entry_point\n"
-            f"sys.argv = ['ddtrack', 'run', 'scenarios/paper_line.toml', '--out', {str(out)!r}, *{SHORT!r}]\n"
-            "entry_point()")
+    code = (
+        "import sys; from ddtrack.cli import entry_point\n"
+        f"sys.argv = ['ddtrack', 'run', 'scenarios/paper_line.toml', '--out', {str(out)!r}, *{SHORT!r}]\n"
+        "entry_point()"
+    )
     return python(code, DDTRACK_CACHE_DIR=str(cache), JAX_LOG_COMPILES="1")
 
 
@@ -81,8 +89,9 @@ def test_a_warm_run_needs_few_programs_and_the_cache_answers_each(tmp_path):
 def test_the_plain_script_reads_the_case_as_ddtrack_does():
     """bench/speed.py's baseline process simulates the same closed loop as ``ddtrack run``."""
     sys.path.insert(0, str(ROOT / "bench"))
-    import ddtrack
     from python_loop import params_from_scenario, params_from_toml
+
+    import ddtrack
 
     path = ROOT / "scenarios" / "paper_line.toml"
     assert params_from_toml(path) == params_from_scenario(ddtrack.load_scenario(path))

@@ -1,5 +1,6 @@
 """``ddtrack bench``: the leaderboard is computed from the runs (paired by cell and seed), resumes, and refuses bad
 input. A tiny suite (short runs, one worker on 127.0.0.1) keeps it fast; the real suites are in docs/benchmarks.md."""
+
 from __future__ import annotations
 
 import json
@@ -11,8 +12,15 @@ import pytest
 from ddtrack.suite import TUNED, Suite, plan_suite, run_suite
 
 SHORT = ("simulation.duration=4", "simulation.metric_window=[1, 4]")
-TINY = Suite(trajectories=("line", "sinusoid"), levels=("paper", "severe"), seeds=2, robustness_mass=(1.0, 1.5),
-             robustness_friction=(1.0,), tune_steps=1, overrides=SHORT)
+TINY = Suite(
+    trajectories=("line", "sinusoid"),
+    levels=("paper", "severe"),
+    seeds=2,
+    robustness_mass=(1.0, 1.5),
+    robustness_friction=(1.0,),
+    tune_steps=1,
+    overrides=SHORT,
+)
 CONTROLLERS = ["backstepping", "ltv_lqr", TUNED]
 
 
@@ -31,7 +39,7 @@ def finished(tmp_path_factory):
 
 
 def test_every_cell_runs_once_and_a_rerun_reuses_them(finished):
-    out, first, again = finished
+    _out, first, again = finished
     cells = len(CONTROLLERS) * (2 * 2 + 2 * 1) * 2  # controllers x (trajectories x levels + map cells) x seeds
     assert first["runs"] == cells and first["reused"] == 0 and first["errors"] == 0
     assert again["reused"] == cells and again["leaderboard"] == first["leaderboard"]
@@ -47,9 +55,11 @@ def test_leaderboard_is_computed_from_the_runs(finished):
         mine = [r for r in leaderboard_runs if r["controller"] == name]
         assert board[name]["runs"] == 2 * 2 * 2
         assert board[name]["e_tr_mean"]["mean"] == pytest.approx(np.mean([r["e_tr_mean"] for r in mine]))
+
     # the paired improvement over backstepping, by (trajectory, level, seed), recomputed by hand
     def cell(r):
         return r["label.trajectory"], r["label.level"], r["seed"]
+
     baseline = {cell(r): r["e_tr_mean"] for r in leaderboard_runs if r["controller"] == "backstepping"}
     lqr = [r for r in leaderboard_runs if r["controller"] == "ltv_lqr"]
     pooled = 100 * (1 - sum(r["e_tr_mean"] for r in lqr) / sum(baseline[cell(r)] for r in lqr))
@@ -83,11 +93,14 @@ def test_common_random_numbers_across_controllers(finished):
         assert len(scenarios) == len(CONTROLLERS) and all(s == scenarios[0] for s in scenarios)
 
 
-@pytest.mark.parametrize("args, field", [
-    (["--controllers", "backstepping,nope"], "--controllers"),
-    (["--controllers", "ltv_lqr,ltv_lqr"], "--controllers"),
-    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
-])
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["--controllers", "backstepping,nope"], "--controllers"),
+        (["--controllers", "ltv_lqr,ltv_lqr"], "--controllers"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
+    ],
+)
 def test_bench_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("bench", *args, "--out", tmp_path / "bench")
     assert code == 2 and stderr.startswith(f"error: {field}"), stderr

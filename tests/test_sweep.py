@@ -1,4 +1,5 @@
 """`ddtrack sweep`: run keys, the Dask cluster (embedded and real), the resumable record store."""
+
 from __future__ import annotations
 
 import json
@@ -15,8 +16,8 @@ from pathlib import Path
 import psutil
 import pyarrow.parquet as pq
 import pytest
-
 from conftest import SCENARIOS
+
 from ddtrack.runner import monte_carlo
 from ddtrack.scenario import load_scenario
 from ddtrack.sweep import plan_sweep, read_records, read_sweep
@@ -31,9 +32,11 @@ def write_sweep(folder: Path, *, masses=(9.0, 11.0), seeds: int = 3, chunk: int 
     """A tiny grid sweep over figure_eight (Gaussian disturbance and noise: every seed differs)."""
     shutil.copy(SCENARIOS / "figure_eight.toml", folder / "figure_eight.toml")
     path = folder / "sweep.toml"
-    path.write_text(f'scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = {seeds}\n'
-                    f'chunk = {chunk}\n{extra}\n[set]\n"simulation.duration" = 2.0\n'
-                    f'"simulation.metric_window" = [0.0, 2.0]\n[grid]\n"robot.mass" = {list(masses)}\n')
+    path.write_text(
+        f'scenario = "figure_eight.toml"\ncontrollers = ["backstepping"]\nseeds = {seeds}\n'
+        f'chunk = {chunk}\n{extra}\n[set]\n"simulation.duration" = 2.0\n'
+        f'"simulation.metric_window" = [0.0, 2.0]\n[grid]\n"robot.mass" = {list(masses)}\n'
+    )
     return path
 
 
@@ -128,8 +131,10 @@ def test_plan_keys_every_run_once(tmp_path):
 def test_random_design_is_seeded(tmp_path):
     shutil.copy(SCENARIOS / "figure_eight.toml", tmp_path / "figure_eight.toml")
     path = tmp_path / "random.toml"
-    path.write_text('scenario = "figure_eight.toml"\nseeds = {start = 5, count = 2}\n'
-                    '[random]\nn = 3\nseed = 7\n"robot.mass" = {low = 9.0, high = 11.0}\n')
+    path.write_text(
+        'scenario = "figure_eight.toml"\nseeds = {start = 5, count = 2}\n'
+        '[random]\nn = 3\nseed = 7\n"robot.mass" = {low = 9.0, high = 11.0}\n'
+    )
     plan = plan_sweep(read_sweep(path), tmp_path)
     masses = [c.overrides["robot.mass"] for c in plan.configurations]
     assert len(set(masses)) == 3 and all(9.0 <= m < 11.0 for m in masses)
@@ -137,21 +142,26 @@ def test_random_design_is_seeded(tmp_path):
     assert sorted({seed for _, seed in plan.runs.values()}) == [5, 6] and len(plan.runs) == 6
 
 
-@pytest.mark.parametrize(("text", "field"), [
-    ('scenario = "figure_eight.toml"\nseeds = 2\nsedes = 3\n[grid]\n"robot.mass" = [9.0]\n', "sedes: unknown key"),
-    ('seeds = 2\n[grid]\n"robot.mass" = [9.0]\n', "scenario: is required"),
-    ('scenario = "missing.toml"\nseeds = 2\n[grid]\n"robot.mass" = [9.0]\n', "scenario: "),
-    ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n', "grid: is empty"),
-    ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n"robot.mass" = []\n', "grid.robot.mass: has no values"),
-    ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n"robot.mas" = [9.0]\n', "robot.mas: unknown key"),
-    ('scenario = "figure_eight.toml"\nseeds = {start = 0, cout = 2}\n[grid]\n"robot.mass" = [9.0]\n',
-     "seeds.cout: unknown key"),
-])
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ('scenario = "figure_eight.toml"\nseeds = 2\nsedes = 3\n[grid]\n"robot.mass" = [9.0]\n', "sedes: unknown key"),
+        ('seeds = 2\n[grid]\n"robot.mass" = [9.0]\n', "scenario: is required"),
+        ('scenario = "missing.toml"\nseeds = 2\n[grid]\n"robot.mass" = [9.0]\n', "scenario: "),
+        ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n', "grid: is empty"),
+        ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n"robot.mass" = []\n', "grid.robot.mass: has no values"),
+        ('scenario = "figure_eight.toml"\nseeds = 2\n[grid]\n"robot.mas" = [9.0]\n', "robot.mas: unknown key"),
+        (
+            'scenario = "figure_eight.toml"\nseeds = {start = 0, cout = 2}\n[grid]\n"robot.mass" = [9.0]\n',
+            "seeds.cout: unknown key",
+        ),
+    ],
+)
 def test_bad_sweep_files_exit_2_naming_the_field(tmp_path, cli, text, field):
     shutil.copy(SCENARIOS / "figure_eight.toml", tmp_path / "figure_eight.toml")
     (tmp_path / "bad.toml").write_text(text)
     out = tmp_path / "out"
-    code, stdout, stderr = cli("sweep", tmp_path / "bad.toml", "--out", out)
+    code, _stdout, stderr = cli("sweep", tmp_path / "bad.toml", "--out", out)
     assert code == 2 and field in stderr, stderr
     assert len(stderr.strip().splitlines()) <= 2 and "Traceback" not in stderr
     assert not out.exists()  # nothing written
@@ -170,14 +180,17 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
         raise FloatingPointError("injected failure")
 
     # threads in this process, so the patch reaches the task (no listening socket: in-process transport)
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
         monkeypatch.setattr(sweep, "monte_carlo", broken)
         failed = sweep.run_sweep(plan, out, client)
         records = read_records(out)
         assert failed.errors == 2 and len(records) == 2
-        assert all(r["status"] == "error" and r["error"] == "FloatingPointError: injected failure"
-                   for r in records.values())
+        assert all(
+            r["status"] == "error" and r["error"] == "FloatingPointError: injected failure" for r in records.values()
+        )
         assert pq.read_table(out / "results.parquet").column("status").to_pylist() == ["error", "error"]
         monkeypatch.undo()
         again = sweep.run_sweep(plan, out, client)  # error records are retried
@@ -201,8 +214,12 @@ def test_local_cluster_listens_on_loopback_only():
         # every listening socket of the scheduler's process (this one) and of the workers is on loopback;
         # with dashboard_address=None the scheduler still serves /health and /metrics, on 127.0.0.1 as well
         pids = [os.getpid(), *client.run(os.getpid).values()]
-        listening = [c for pid in pids for c in psutil.Process(pid).net_connections(kind="inet")
-                     if c.status == psutil.CONN_LISTEN]
+        listening = [
+            c
+            for pid in pids
+            for c in psutil.Process(pid).net_connections(kind="inet")
+            if c.status == psutil.CONN_LISTEN
+        ]
         assert len(listening) >= 3
         assert {c.laddr.ip for c in listening} <= {"127.0.0.1", "::1"}, listening
 
@@ -219,8 +236,9 @@ def test_grid_sweep_equals_direct_monte_carlo(tmp_path, cli):
     assert_records_match(records, (9.0, 11.0), 3)
     table = pq.read_table(out / "results.parquet")
     assert table.column("key").to_pylist() == sorted(records)  # sorted by key
-    assert table.column("set.robot.mass").to_pylist() == [records[k]["configuration"]["overrides"]["robot.mass"]
-                                                         for k in sorted(records)]
+    assert table.column("set.robot.mass").to_pylist() == [
+        records[k]["configuration"]["overrides"]["robot.mass"] for k in sorted(records)
+    ]
     assert table.column("e_tr_mean").to_pylist() == [records[k]["metrics"]["e_tr_mean"] for k in sorted(records)]
     assert (out / "results.csv").read_text().count("\n") == 7
     before = (out / "results.parquet").read_bytes()
@@ -279,14 +297,43 @@ class Cluster:
     def __init__(self, folder: Path, workers: int) -> None:
         self.file = folder / "scheduler.json"
         self.procs: list[subprocess.Popen] = []
-        log = open(folder / "dask.log", "wb")  # noqa: SIM115  (kept open for the processes' lifetime)
-        self.procs.append(subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                            "--scheduler-file", str(self.file), "--no-dashboard"],
-                                           stdout=log, stderr=log))
+        log = open(folder / "dask.log", "wb")
+        self.procs.append(
+            subprocess.Popen(
+                [
+                    DASK,
+                    "scheduler",
+                    "--host",
+                    "127.0.0.1",
+                    "--port",
+                    "0",
+                    "--scheduler-file",
+                    str(self.file),
+                    "--no-dashboard",
+                ],
+                stdout=log,
+                stderr=log,
+            )
+        )
         wait_for(self.file.exists, 60, "the scheduler file")
         for _ in range(workers):
-            self.procs.append(subprocess.Popen([DASK, "worker", "--scheduler-file", str(self.file), "--nthreads", "1",
-                                                "--no-dashboard", "--host", "127.0.0.1"], stdout=log, stderr=log))
+            self.procs.append(
+                subprocess.Popen(
+                    [
+                        DASK,
+                        "worker",
+                        "--scheduler-file",
+                        str(self.file),
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                    ],
+                    stdout=log,
+                    stderr=log,
+                )
+            )
 
     def client(self):
         from distributed import Client
@@ -311,9 +358,12 @@ def test_sweep_on_a_real_cluster_survives_a_killed_worker(tmp_path):
             assert info["address"].startswith("tcp://127.0.0.1:")
             assert all(a.startswith("tcp://127.0.0.1:") for a in info["workers"])
             pids = client.run(os.getpid)  # worker address -> pid
-            sweep = subprocess.Popen([PYTHON, "-m", "ddtrack", "sweep", str(path), "--out", str(out),
-                                      "--scheduler-file", str(cluster.file)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            sweep = subprocess.Popen(
+                [PYTHON, "-m", "ddtrack", "sweep", str(path), "--out", str(out), "--scheduler-file", str(cluster.file)],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
             # kill a worker while it holds a task (the first tasks compile for seconds: a wide window)
             busy = wait_for(lambda: [w for w, tasks in client.processing().items() if tasks], 120, "a busy worker")
             victim = pids[busy[0]]
@@ -337,9 +387,11 @@ def test_sweep_on_a_real_cluster_survives_a_killed_worker(tmp_path):
 def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
     shutil.copy(SCENARIOS / "figure_eight.toml", tmp_path / "figure_eight.toml")
     path = tmp_path / "random.toml"
-    path.write_text('scenario = "figure_eight.toml"\nseeds = {start = 3, count = 2}\nchunk = 2\n'
-                    '[set]\nsimulation = {duration = 2.0, metric_window = [0.0, 2.0]}\n'
-                    '[random]\nn = 2\nseed = 1\n"plant.mass" = {low = 9.0, high = 13.0}\n')
+    path.write_text(
+        'scenario = "figure_eight.toml"\nseeds = {start = 3, count = 2}\nchunk = 2\n'
+        "[set]\nsimulation = {duration = 2.0, metric_window = [0.0, 2.0]}\n"
+        '[random]\nn = 2\nseed = 1\n"plant.mass" = {low = 9.0, high = 13.0}\n'
+    )
     plan = plan_sweep(read_sweep(path), tmp_path)
     out = tmp_path / "out"
     cluster = Cluster(tmp_path, workers=1)
@@ -348,8 +400,12 @@ def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
         assert address.startswith("tcp://127.0.0.1:")
         with cluster.client() as client:
             client.wait_for_workers(1, timeout=60)
-        result = subprocess.run([PYTHON, "-m", "ddtrack", "sweep", str(path), "--out", str(out), "--scheduler", address],
-                                capture_output=True, text=True, timeout=300)
+        result = subprocess.run(
+            [PYTHON, "-m", "ddtrack", "sweep", str(path), "--out", str(out), "--scheduler", address],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert result.returncode == 0, result.stderr
     finally:
         cluster.close()
@@ -357,8 +413,11 @@ def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
     assert set(records) == set(plan.runs) and len(records) == 4
     for configuration in plan.configurations:
         for row in monte_carlo(configuration.scenario, [3, 4], chunk_size=2):
-            key = next(k for k, (i, seed) in plan.runs.items()
-                       if plan.configurations[i] is configuration and seed == row["seed"])
+            key = next(
+                k
+                for k, (i, seed) in plan.runs.items()
+                if plan.configurations[i] is configuration and seed == row["seed"]
+            )
             assert records[key]["configuration"]["overrides"] == configuration.overrides
             for name in METRICS:
                 assert records[key]["metrics"][name] == pytest.approx(row[name], rel=0, abs=1e-12)
@@ -369,7 +428,8 @@ def test_unreachable_scheduler_exits_2_and_leaves_no_folder(tmp_path, cli):
     with socket.socket() as closed:  # a loopback port that nothing listens on
         closed.bind(("127.0.0.1", 0))
         port = closed.getsockname()[1]
-    code, _, stderr = cli("sweep", sweep_file, "--out", tmp_path / "out" / "sweep",
-                          "--scheduler", f"tcp://127.0.0.1:{port}")
+    code, _, stderr = cli(
+        "sweep", sweep_file, "--out", tmp_path / "out" / "sweep", "--scheduler", f"tcp://127.0.0.1:{port}"
+    )
     assert code == 2 and "cannot reach the Dask scheduler" in stderr
     assert not (tmp_path / "out").exists()

@@ -1,4 +1,5 @@
 """The recorded heading and its reference are continuous the same way; only e_theta is wrapped."""
+
 from __future__ import annotations
 
 from pathlib import Path

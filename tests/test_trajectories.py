@@ -3,6 +3,7 @@
 Every trajectory is evaluated through one jitted ``vmap`` over a grid of times (the trajectory is a
 jit argument, so each class compiles once per grid size).
 """
+
 import math
 
 import jax
@@ -46,12 +47,15 @@ PIECEWISE = {
     "square": square(),
     "rounded_square": square(corner_radius=0.5),
     "open_polyline": polyline_path([(0.0, 0.0), (3.0, 0.0), (3.0, 4.0), (-1.0, 4.0)], speed=0.4),
-    "rounded_open_polyline": polyline_path([(0.0, 0.0), (3.0, 0.0), (3.0, 4.0), (-1.0, 1.0)], speed=0.4,
-                                           corner_radius=0.6),
-    "rounded_zigzag": polyline_path([(0.0, 0.0), (3.0, 0.0), (5.0, -2.0), (8.0, -2.0), (8.0, -6.0)], speed=0.5,
-                                    corner_radius=0.5),  # right and left turns
-    "rounded_loop": polyline_path([(0.0, 0.0), (4.0, 1.0), (1.0, 3.0), (0.0, 0.0)], speed=0.3, corner_radius=0.4,
-                                  loop=True),
+    "rounded_open_polyline": polyline_path(
+        [(0.0, 0.0), (3.0, 0.0), (3.0, 4.0), (-1.0, 1.0)], speed=0.4, corner_radius=0.6
+    ),
+    "rounded_zigzag": polyline_path(
+        [(0.0, 0.0), (3.0, 0.0), (5.0, -2.0), (8.0, -2.0), (8.0, -6.0)], speed=0.5, corner_radius=0.5
+    ),  # right and left turns
+    "rounded_loop": polyline_path(
+        [(0.0, 0.0), (4.0, 1.0), (1.0, 3.0), (0.0, 0.0)], speed=0.3, corner_radius=0.4, loop=True
+    ),
 }
 ALL = {**SMOOTH, **PIECEWISE}
 
@@ -85,7 +89,7 @@ def test_reference_agrees_with_finite_differences_of_its_position(name):
     t = sample_times(name, traj)
     n = t.size
     ref = as_np(evaluate(traj, jnp.asarray(np.concatenate([t - FD_STEP, t, t + FD_STEP]))))
-    before, now, after = ({k: v[i * n:(i + 1) * n] for k, v in ref.items()} for i in range(3))
+    before, now, after = ({k: v[i * n : (i + 1) * n] for k, v in ref.items()} for i in range(3))
 
     def diff(field):
         return (after[field] - before[field]) / (2 * FD_STEP)
@@ -209,8 +213,7 @@ def test_rounded_square_lap_length_arcs_and_c1():
     # seven segments: four straights with three quarter-circle fillets between them, C0 stays sharp
     np.testing.assert_allclose(np.asarray(rs.curvatures), [0, 1 / r, 0, 1 / r, 0, 1 / r, 0], rtol=1e-15)
     offsets = np.asarray(rs.offsets)
-    expected_offsets = np.cumsum([0, SIDE - r, np.pi * r / 2, SIDE - 2 * r, np.pi * r / 2, SIDE - 2 * r,
-                                  np.pi * r / 2])
+    expected_offsets = np.cumsum([0, SIDE - r, np.pi * r / 2, SIDE - 2 * r, np.pi * r / 2, SIDE - 2 * r, np.pi * r / 2])
     np.testing.assert_allclose(offsets, expected_offsets, rtol=1e-14)
 
     # closes at C0 after one lap
@@ -304,19 +307,22 @@ def test_jit_treats_trajectory_parameters_as_data():
 # --- polyline_path validation -------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("points, kwargs, match", [
-    ([(0, 0), (1, 0), (1, 0), (2, 1)], {}, r"point 2 repeats point 1"),
-    ([(0, 0), (float("nan"), 1.0), (2, 1)], {}, r"NaN"),
-    ([(0, 0), (1.0, float("inf"))], {}, r"finite"),
-    ([(0, 0)], {}, r"at least two"),
-    ([], {}, r"at least two"),
-    ([(0, 0), (1, 0)], {"speed": 0.0}, r"speed must be > 0, got 0"),
-    ([(0, 0), (1, 0)], {"speed": -0.5}, r"speed must be > 0, got -0.5"),
-    ([(0, 0), (1, 0)], {"speed": float("nan")}, r"speed must be > 0"),
-    ([(0, 0), (2, 0), (1, 0)], {"corner_radius": 0.1}, r"reverses direction at point 1"),
-    ([(0, 0), (1, 0), (1, 1)], {"corner_radius": 2.0}, r"corner radius 2.0 m does not fit on leg 0"),
-    ([(0, 0), (1, 0), (1, 1)], {"corner_radius": -0.1}, r"corner radius must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "points, kwargs, match",
+    [
+        ([(0, 0), (1, 0), (1, 0), (2, 1)], {}, r"point 2 repeats point 1"),
+        ([(0, 0), (float("nan"), 1.0), (2, 1)], {}, r"NaN"),
+        ([(0, 0), (1.0, float("inf"))], {}, r"finite"),
+        ([(0, 0)], {}, r"at least two"),
+        ([], {}, r"at least two"),
+        ([(0, 0), (1, 0)], {"speed": 0.0}, r"speed must be > 0, got 0"),
+        ([(0, 0), (1, 0)], {"speed": -0.5}, r"speed must be > 0, got -0.5"),
+        ([(0, 0), (1, 0)], {"speed": float("nan")}, r"speed must be > 0"),
+        ([(0, 0), (2, 0), (1, 0)], {"corner_radius": 0.1}, r"reverses direction at point 1"),
+        ([(0, 0), (1, 0), (1, 1)], {"corner_radius": 2.0}, r"corner radius 2.0 m does not fit on leg 0"),
+        ([(0, 0), (1, 0), (1, 1)], {"corner_radius": -0.1}, r"corner radius must be >= 0"),
+    ],
+)
 def test_polyline_path_rejects_bad_input_with_helpful_message(points, kwargs, match):
     kwargs = {"speed": 0.5, **kwargs}
     with pytest.raises(ValueError, match=match):

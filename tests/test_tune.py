@@ -1,4 +1,5 @@
 """``ddtrack tune``: the gradient through whole rollouts is right, and the command writes a usable fragment."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,9 @@ import tomllib
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import SCENARIOS, central_difference
 
 import ddtrack
-from conftest import SCENARIOS, central_difference
 from ddtrack.tune import DEFAULT_GAMMA, problems, total_loss
 
 # 3 s from 0.3 m off the line: the gains act from the start (no clamp-dominated transient), the window is [1, 3] s
@@ -28,8 +29,9 @@ def test_gradient_through_rollouts_matches_finite_differences(effort_weight, who
 
     import jax
 
-    analytic = np.asarray(jax.grad(lambda lg: total_loss(training, lg, gamma, effort_weight, whole_run))(
-        jnp.asarray(log_gains)))
+    analytic = np.asarray(
+        jax.grad(lambda lg: total_loss(training, lg, gamma, effort_weight, whole_run))(jnp.asarray(log_gains))
+    )
     numeric = central_difference(loss, log_gains, 1e-5)
     assert np.all(np.abs(analytic) > 0)  # every gain matters to this loss
     np.testing.assert_allclose(analytic, numeric, rtol=1e-5)
@@ -37,8 +39,18 @@ def test_gradient_through_rollouts_matches_finite_differences(effort_weight, who
 
 def test_tune_command_lowers_the_loss_and_writes_a_fragment(tmp_path, cli):
     out = tmp_path / "tune"
-    code, stdout, stderr = cli("tune", SCENARIOS / "paper_line.toml", SCENARIOS / "circle.toml", "--seeds", "2",
-                               "--steps", "4", *[a for s in SHORT for a in ("--set", s)], "--out", out)
+    code, stdout, stderr = cli(
+        "tune",
+        SCENARIOS / "paper_line.toml",
+        SCENARIOS / "circle.toml",
+        "--seeds",
+        "2",
+        "--steps",
+        "4",
+        *[a for s in SHORT for a in ("--set", s)],
+        "--out",
+        out,
+    )
     assert code == 0, stderr
     summary = json.loads((out / "tune.json").read_text())
     assert summary["final_loss"] < summary["initial_loss"] and "lower" in stdout
@@ -53,11 +65,14 @@ def test_tune_command_lowers_the_loss_and_writes_a_fragment(tmp_path, cli):
     assert tuned.controller.gains == pytest.approx(tuple(gains))
 
 
-@pytest.mark.parametrize("args, field", [
-    (["--controller", "nn_adaptive_backstepping"], "--controller"),
-    (["--gamma", "1", "-1", "0"], "--gamma"),
-    (["--set", "controller.gains=[1, 0, 1]"], "controller.gains"),
-])
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["--controller", "nn_adaptive_backstepping"], "--controller"),
+        (["--gamma", "1", "-1", "0"], "--gamma"),
+        (["--set", "controller.gains=[1, 0, 1]"], "controller.gains"),
+    ],
+)
 def test_tune_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("tune", SCENARIOS / "paper_line.toml", *args, "--out", tmp_path / "tune")
     assert code == 2 and stderr.startswith(f"error: {field}"), stderr

@@ -11,6 +11,7 @@ Quick start::
 ``--help`` or a script that only loads scenarios does not pay for JAX. JAX runs in float64 and Gymnasium knows
 ``ddtrack/DiffDriveTracking-v0`` as soon as either is imported, before or after ddtrack.
 """
+
 from importlib import import_module as _import_module
 
 from ._after_import import after_import as _after_import
@@ -32,14 +33,26 @@ _after_import("gymnasium", _register_env)
 __version__ = "0.1.0"
 
 _SOURCES = {
-    "ConfigError": "errors", "DdtrackError": "errors", "RunError": "errors",
-    "improvement": "metrics", "summarize": "metrics", "tracking_error": "metrics",
-    "monte_carlo": "runner", "prepare": "runner", "run": "runner", "run_batch": "runner",
-    "Scenario": "scenario", "load_scenario": "scenario", "validate_scenario": "scenario",
-    "Draws": "sim", "SimResult": "sim", "simulate": "sim", "timeseries": "sim",
+    "ConfigError": "errors",
+    "DdtrackError": "errors",
+    "RunError": "errors",
+    "improvement": "metrics",
+    "summarize": "metrics",
+    "tracking_error": "metrics",
+    "monte_carlo": "runner",
+    "prepare": "runner",
+    "run": "runner",
+    "run_batch": "runner",
+    "Scenario": "scenario",
+    "load_scenario": "scenario",
+    "validate_scenario": "scenario",
+    "Draws": "sim",
+    "SimResult": "sim",
+    "simulate": "sim",
+    "timeseries": "sim",
 }
 
-__all__ = sorted(_SOURCES)
+__all__ = sorted(_SOURCES)  # noqa: PLE0605 (the lazy-import table above is the one list of public names)
 
 
 def __getattr__(name: str):

@@ -1,6 +1,7 @@
 """Set-up that waits for a heavy module's import: ``import ddtrack`` stays light (no JAX, Gymnasium, Matplotlib),
 yet JAX still runs in float64 and Gymnasium still knows ``ddtrack/DiffDriveTracking-v0`` once they are imported
 (the actions are in ``ddtrack/__init__.py``)."""
+
 from __future__ import annotations
 
 import importlib.abc

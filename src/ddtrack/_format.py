@@ -1,4 +1,5 @@
 """Numbers as text: significant digits, so a TurtleBot's effort of 0.0043 does not print as 0.0."""
+
 from __future__ import annotations
 
 import math

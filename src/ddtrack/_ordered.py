@@ -5,6 +5,7 @@ axis included: the emulator identified in a batch of 64 runs rounded differently
 batch of 2, through its gradient norm. Added pairwise by explicit slices, a sum leaves XLA nothing to reorder,
 so a run and its row in any batch give the same bits (docs/reliability.md, tests/test_determinism.py).
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -17,6 +18,6 @@ def total(x: Array) -> Array:
     terms = jnp.ravel(x)
     while terms.shape[0] > 1:
         half = terms.shape[0] // 2
-        paired = terms[:half] + terms[half:2 * half]
-        terms = paired if terms.shape[0] % 2 == 0 else jnp.concatenate([paired, terms[2 * half:]])
+        paired = terms[:half] + terms[half : 2 * half]
+        terms = paired if terms.shape[0] % 2 == 0 else jnp.concatenate([paired, terms[2 * half :]])
     return terms[0]

@@ -1,4 +1,5 @@
 """Frozen dataclasses that are JAX pytrees: numeric fields are traced leaves, ``static`` fields are not."""
+
 from __future__ import annotations
 
 import dataclasses

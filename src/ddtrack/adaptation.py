@@ -9,6 +9,7 @@ NMSE) and returns the reasons, each ``{"code", "message"}``:
 * ``adaptation_inactive``: no gain moved by more than :data:`MIN_GAIN_CHANGE` of its start value, so the run
   is backstepping with extra steps.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -32,8 +33,9 @@ def _settings(controller: Any) -> tuple[str, str, bool]:
     return controller.kind, getattr(controller, "jacobian", "network"), any(r > 0 for r in rates)
 
 
-def adaptation_warnings(controller: Any, columns: Mapping[str, Sequence[float]],
-                        nmse: Sequence[float] | None = None) -> list[dict[str, str]]:
+def adaptation_warnings(
+    controller: Any, columns: Mapping[str, Sequence[float]], nmse: Sequence[float] | None = None
+) -> list[dict[str, str]]:
     """The reasons the NN-adaptive adaptation of one run could not work; [] for any other controller.
 
     Parameters
@@ -51,18 +53,37 @@ def adaptation_warnings(controller: Any, columns: Mapping[str, Sequence[float]],
     found = []
     if nmse is not None and jacobian == "network" and max(nmse) > MAX_NMSE:
         values = ", ".join(f"{name} {value:.3g}" for name, value in zip(_OUTPUTS, nmse, strict=True))
-        found.append({"code": "identification_failed", "message": (
-            f"the emulator's identification failed (NMSE {values}; above {MAX_NMSE:g} is unusable), so the gains "
-            "follow a wrong Jacobian; lengthen controller.identification_duration, keep identification_speed well "
-            "inside the clamps, or set controller.jacobian = \"model\"")})
+        found.append(
+            {
+                "code": "identification_failed",
+                "message": (
+                    f"the emulator's identification failed (NMSE {values}; above {MAX_NMSE:g} is unusable), so the "
+                    "gains follow a wrong Jacobian; lengthen controller.identification_duration, keep "
+                    'identification_speed well inside the clamps, or set controller.jacobian = "model"'
+                ),
+            }
+        )
     if "gate" in columns and len(columns["gate"]) and np.mean(columns["gate"]) < MIN_GATE_OPEN:
-        found.append({"code": "adaptation_gated", "message": (
-            f"the gains could adapt only {100 * np.mean(columns['gate']):.3g} % of the time (the gate closes when "
-            "e_tr >= controller.gate_error or a clamp or torque limit acts); raise gate_error or ease the limits")})
+        found.append(
+            {
+                "code": "adaptation_gated",
+                "message": (
+                    f"the gains could adapt only {100 * np.mean(columns['gate']):.3g} % of the time (the gate closes "
+                    "when e_tr >= controller.gate_error or a clamp or torque limit acts); raise gate_error or ease "
+                    "the limits"
+                ),
+            }
+        )
     if adapts and all(g in columns for g in _GAINS) and len(columns["kx"]):
         change = max(float(np.max(np.abs(np.asarray(columns[g]) - columns[g][0]) / abs(columns[g][0]))) for g in _GAINS)
         if change <= MIN_GAIN_CHANGE:
-            found.append({"code": "adaptation_inactive", "message": (
-                f"no gain moved by more than {100 * change:.2g} % of its start value: this run is backstepping "
-                "with fixed gains; see the warnings above or raise controller.rates")})
+            found.append(
+                {
+                    "code": "adaptation_inactive",
+                    "message": (
+                        f"no gain moved by more than {100 * change:.2g} % of its start value: this run is backstepping "
+                        "with fixed gains; see the warnings above or raise controller.rates"
+                    ),
+                }
+            )
     return found

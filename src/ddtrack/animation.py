@@ -11,6 +11,7 @@ Frames sample the run at ``fps / speed`` frames per simulated second, at most ``
 longer run plays faster). GIF is written with Pillow through matplotlib's :class:`PillowWriter`, on one
 palette for every frame (no flicker, a fraction of the memory); MP4 through ffmpeg where it is on PATH.
 """
+
 from __future__ import annotations
 
 import os
@@ -23,19 +24,19 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")  # headless by default, as in plotting
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.animation import FFMpegWriter, PillowWriter  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.colors import to_rgba  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Polygon  # noqa: E402
-from PIL import Image  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.animation import FFMpegWriter, PillowWriter
+from matplotlib.collections import LineCollection
+from matplotlib.colors import to_rgba
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
+from PIL import Image
 
-from ._format import significant  # noqa: E402
-from .errors import ConfigError, RunError  # noqa: E402
-from .plotting import ADAPTIVE, REFERENCE, ROBOT  # noqa: E402
-from .scenario import Scenario, load_scenario  # noqa: E402
+from ._format import significant
+from .errors import ConfigError, RunError
+from .plotting import ADAPTIVE, REFERENCE, ROBOT
+from .scenario import Scenario, load_scenario
 
 Columns = Mapping[str, np.ndarray]
 GAINS = ("kx", "ky", "ktheta")
@@ -99,8 +100,11 @@ def read_run(folder: str | Path) -> tuple[dict[str, np.ndarray], Scenario]:
         raise ConfigError("", f"'{folder}' is not a folder", "give a run folder written by `ddtrack run --out DIR`")
     missing = [name for name in ("timeseries.parquet", "scenario.toml") if not (folder / name).is_file()]
     if missing:
-        raise ConfigError("", f"'{folder}' is not a run folder: {' and '.join(missing)} missing",
-                          "give a folder written by `ddtrack run --out DIR`")
+        raise ConfigError(
+            "",
+            f"'{folder}' is not a run folder: {' and '.join(missing)} missing",
+            "give a folder written by `ddtrack run --out DIR`",
+        )
     try:
         table = pq.read_table(folder / "timeseries.parquet")
     except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid is a ValueError
@@ -218,8 +222,9 @@ def _figure_size(aspect: float, with_gains: bool, dpi: float) -> tuple[float, fl
     return tuple(2 * round(size * dpi / 2) / dpi for size in (width, height))
 
 
-def _emptiest_corner(c: Columns, x_lim: tuple[float, float], y_lim: tuple[float, float], *,
-                     size: float) -> tuple[float, float, float, float]:
+def _emptiest_corner(
+    c: Columns, x_lim: tuple[float, float], y_lim: tuple[float, float], *, size: float
+) -> tuple[float, float, float, float]:
     """Where, in axes fractions, a square inset of side ``size`` covers the fewest points of either path: a
     corner, an edge's middle or the centre (the inside of a square path), preferring the lower right."""
     points = np.concatenate([np.column_stack([c["x"], c["y"]]), np.column_stack([c["x_ref"], c["y_ref"]])])
@@ -227,8 +232,12 @@ def _emptiest_corner(c: Columns, x_lim: tuple[float, float], y_lim: tuple[float,
     fraction = (points - [x_lim[0], y_lim[0]]) / [np.ptp(x_lim), np.ptp(y_lim)]
     pad = 0.02
     places = [(a, b) for b in (pad, (1 - size) / 2, 1 - size - pad) for a in (1 - size - pad, pad, (1 - size) / 2)]
-    covered = [np.count_nonzero(np.all((fraction >= [a - pad, b - pad]) & (fraction <= [a + size + pad, b + size + pad]),
-                                       axis=1)) for a, b in places]
+    covered = [
+        np.count_nonzero(
+            np.all((fraction >= [a - pad, b - pad]) & (fraction <= [a + size + pad, b + size + pad]), axis=1)
+        )
+        for a, b in places
+    ]
     a, b = places[int(np.argmin(covered))]  # argmin keeps the first of equals: the preferred order above
     return (a, b, size, size)
 
@@ -238,8 +247,11 @@ class _Robot:
 
     def __init__(self, ax, *, half_axle: float, wheel_radius: float, color: str, outline: bool) -> None:
         self.geometry = {"half_axle": half_axle, "wheel_radius": wheel_radius}
-        style = ({"fill": False, "ec": color, "lw": 1.0, "ls": "--"} if outline
-                 else {"fc": to_rgba(color, 0.55), "ec": color, "lw": 1.2})
+        style = (
+            {"fill": False, "ec": color, "lw": 1.0, "ls": "--"}
+            if outline
+            else {"fc": to_rgba(color, 0.55), "ec": color, "lw": 1.2}
+        )
         zero = np.zeros((4, 2))
         self.body = ax.add_patch(Polygon(zero, closed=True, zorder=4, **style))
         wheel_style = style if outline else {"fc": WHEEL, "ec": WHEEL, "lw": 0.8}
@@ -278,8 +290,9 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
     t = c["t"]
     with_gains = gains_moved(c)
     x_lim, y_lim = _limits(c, margin=2.5 * half_axle)
-    fig = plt.figure(figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi,
-                     layout="constrained")
+    fig = plt.figure(
+        figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi, layout="constrained"
+    )
     if with_gains:
         grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1.0))
         ax = fig.add_subplot(grid[:, 0])
@@ -306,10 +319,12 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
 
     travelled = [view.plot(c["x"][:1], c["y"][:1], color=ROBOT, lw=0.6, alpha=0.35, zorder=2)[0] for view in views]
     trails = [view.add_collection(LineCollection([], lw=2.2, zorder=3)) for view in views]
-    ghosts = [_Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=REFERENCE, outline=True)
-              for view in views]
-    robots = [_Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=ROBOT, outline=False)
-              for view in views]
+    ghosts = [
+        _Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=REFERENCE, outline=True) for view in views
+    ]
+    robots = [
+        _Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=ROBOT, outline=False) for view in views
+    ]
     ax.plot([], [], color=ROBOT, lw=2.2, label="robot and its trail")  # legend entries for the patches
     ax.plot([], [], ls="none", marker="s", mfc="none", mec=REFERENCE, label="reference pose")
     fig.legend(loc="outside lower center", ncols=3, fontsize=8, frameon=False)  # off the map: a robot never hides it
@@ -330,7 +345,7 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
         gain_axes[-1].set_xlabel("t [s]")
 
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    trail_rows = max(int(round(TRAIL_SECONDS / dt)), 2)
+    trail_rows = max(round(TRAIL_SECONDS / dt), 2)
     zoom_half = 4.0 * half_axle
     robot_color = np.asarray(to_rgba(ROBOT))
 
@@ -358,13 +373,18 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
 
     draw(0)
     main = [travelled[0], trails[0], *ghosts[0].artists, *robots[0].artists]
-    moving = [*main, *([zoom_ax] if zoom_ax is not None else []), clock,
-              *(artist for cursor, done, _ in cursors for artist in (done, cursor))]
+    moving = [
+        *main,
+        *([zoom_ax] if zoom_ax is not None else []),
+        clock,
+        *(artist for cursor, done, _ in cursors for artist in (done, cursor)),
+    ]
     return _Scene(fig, draw, moving)
 
 
-def animation_figure(columns: Columns, *, half_axle: float, wheel_radius: float, title: str = "",
-                     zoom: bool = True, dpi: float = 100) -> tuple[Figure, Callable[[int], None]]:
+def animation_figure(
+    columns: Columns, *, half_axle: float, wheel_radius: float, title: str = "", zoom: bool = True, dpi: float = 100
+) -> tuple[Figure, Callable[[int], None]]:
     """The animation's figure and ``draw(row)``, which shows the run at that row of the time series.
 
     Parameters
@@ -438,13 +458,29 @@ class _BlitPillowWriter(PillowWriter):
                 yield frames.pop()
 
         first = frames.pop()
-        first.save(self.outfile, format="GIF", save_all=True, append_images=handed_over(),
-                   duration=round(1000 / self.fps), loop=0)
+        first.save(
+            self.outfile,
+            format="GIF",
+            save_all=True,
+            append_images=handed_over(),
+            duration=round(1000 / self.fps),
+            loop=0,
+        )
 
 
-def animate(columns: Columns, out: str | Path, *, half_axle: float, wheel_radius: float, fps: float = 20.0,
-            speed: float = 2.0, max_frames: int = MAX_FRAMES, title: str = "", zoom: bool = True,
-            dpi: float = 100) -> AnimationInfo:
+def animate(
+    columns: Columns,
+    out: str | Path,
+    *,
+    half_axle: float,
+    wheel_radius: float,
+    fps: float = 20.0,
+    speed: float = 2.0,
+    max_frames: int = MAX_FRAMES,
+    title: str = "",
+    zoom: bool = True,
+    dpi: float = 100,
+) -> AnimationInfo:
     """Write an animation of a run to ``out`` (``.gif`` with Pillow, ``.mp4`` with ffmpeg), atomically.
 
     Parameters
@@ -485,8 +521,11 @@ def animate(columns: Columns, out: str | Path, *, half_axle: float, wheel_radius
     if suffix not in SUFFIXES:
         raise ConfigError("--out", f"'{out.name}': an animation is written as .gif or .mp4", "e.g. --out run.gif")
     if suffix == ".mp4" and not (shutil.which("ffmpeg") and FFMpegWriter.isAvailable()):
-        raise ConfigError("--out", f"writing '{out.name}' needs ffmpeg on PATH, and it is not there",
-                          "install ffmpeg (e.g. apt install ffmpeg), or write a .gif (Pillow, no ffmpeg needed)")
+        raise ConfigError(
+            "--out",
+            f"writing '{out.name}' needs ffmpeg on PATH, and it is not there",
+            "install ffmpeg (e.g. apt install ffmpeg), or write a .gif (Pillow, no ffmpeg needed)",
+        )
     rows, played = frame_indices(np.asarray(columns["t"], float), fps=fps, speed=speed, max_frames=max_frames)
     scene = _scene(columns, half_axle=half_axle, wheel_radius=wheel_radius, title=title, zoom=zoom, dpi=dpi)
     try:

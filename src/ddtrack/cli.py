@@ -2,6 +2,7 @@
 
 User mistakes print one or two plain lines on stderr, never a traceback.
 """
+
 from __future__ import annotations
 
 import os
@@ -20,8 +21,10 @@ from .errors import ConfigError, RunError
 LISTS = ("controllers", "trajectories", "disturbances")
 
 overwrite_option = click.option(
-    "--overwrite", is_flag=True,
-    help="Replace another ddtrack command's output (or, for sweep and bench, another study) in --out, whole.")
+    "--overwrite",
+    is_flag=True,
+    help="Replace another ddtrack command's output (or, for sweep and bench, another study) in --out, whole.",
+)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -30,16 +33,27 @@ def cli() -> None:
     """Simulate, compare and tune trajectory-tracking controllers for differential-drive robots."""
 
 
-@cli.command(short_help='Simulate SCENARIO once and write a run folder.')
+@cli.command(short_help="Simulate SCENARIO once and write a run folder.")
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("--controller", "controller", metavar="NAME", help="Replace controller.kind (see `ddtrack list`).")
-@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
-              help="Override a scenario value, e.g. --set robot.mass=12 (repeatable).")
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="SECTION.KEY=VALUE",
+    help="Override a scenario value, e.g. --set robot.mass=12 (repeatable).",
+)
 @click.option("--seed", type=click.IntRange(min=0), help="Replace simulation.seed.")
 @click.option("--out", type=click.Path(path_type=Path), help="Run folder [default: runs/NAME].")
 @overwrite_option
-def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed: int | None, out: Path | None,
-        overwrite: bool) -> int:
+def run(
+    scenario: Path,
+    controller: str | None,
+    overrides: tuple[str, ...],
+    seed: int | None,
+    out: Path | None,
+    overwrite: bool,
+) -> int:
     """Simulate SCENARIO once and write a run folder."""
     from .scenario import load_scenario
 
@@ -67,29 +81,40 @@ def run(scenario: Path, controller: str | None, overrides: tuple[str, ...], seed
     identification = None
     if setup.identification is not None:
         found = setup.identification
-        identification = {"samples": int(found.samples), "epochs": int(found.epoch_loss.shape[0]),
-                          "epoch_loss": [float(v) for v in found.epoch_loss],
-                          "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True))}
+        identification = {
+            "samples": int(found.samples),
+            "epochs": int(found.epoch_loss.shape[0]),
+            "epoch_loss": [float(v) for v in found.epoch_loss],
+            "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True)),
+        }
     with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
         write_run(stage, spec, columns, metrics, identification)
     show("")
-    click.echo(f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
-               f"{sim.duration:g} s -> {folder}")
+    click.echo(
+        f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
+        f"{sim.duration:g} s -> {folder}"
+    )
     if result.status_name != "ok":
-        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {remedy(result.status_name, columns)}",
-                   err=True)
+        click.echo(
+            f"run {result.status_name} at t = {result.failure_time:.2f} s: {remedy(result.status_name, columns)}",
+            err=True,
+        )
         return 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
     settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant
     from ._format import percent, significant
 
-    click.echo(f"  e_tr over {window}: mean {significant(metrics['e_tr_mean'])} m, "
-               f"rms {significant(metrics['e_tr_rms'])} m, max {significant(metrics['e_tr_max'])} m, "
-               f"final {significant(metrics['e_tr_final'])} m")
-    click.echo(f"  settling (e_tr < {sim.settling_threshold:g} m): "
-               f"{'never' if settle is None else f'{significant(settle)} s'}; "
-               f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
-               f"saturated {percent(metrics['saturation_fraction'])} of the time")
+    click.echo(
+        f"  e_tr over {window}: mean {significant(metrics['e_tr_mean'])} m, "
+        f"rms {significant(metrics['e_tr_rms'])} m, max {significant(metrics['e_tr_max'])} m, "
+        f"final {significant(metrics['e_tr_final'])} m"
+    )
+    click.echo(
+        f"  settling (e_tr < {sim.settling_threshold:g} m): "
+        f"{'never' if settle is None else f'{significant(settle)} s'}; "
+        f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
+        f"saturated {percent(metrics['saturation_fraction'])} of the time"
+    )
     for warning in metrics["warnings"]:  # the numbers above may not mean what they seem: say why, on stderr
         click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
     return 0
@@ -115,24 +140,24 @@ def folder_name(name: str) -> str:
     return safe or "run"
 
 
-@cli.command(short_help='Check SCENARIO without running it.')
+@cli.command(short_help="Check SCENARIO without running it.")
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a value first.")
 def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
     """Check SCENARIO without running it."""
+    from .feasibility import check
     from .scenario import load_scenario
 
-    from .feasibility import check
-
     spec = load_scenario(scenario, overrides=overrides)
-    click.echo(f"ok: {spec.name} ({spec.trajectory.kind}, {spec.controller.kind}, "
-               f"{spec.simulation.n_steps} control periods)")
+    click.echo(
+        f"ok: {spec.name} ({spec.trajectory.kind}, {spec.controller.kind}, {spec.simulation.n_steps} control periods)"
+    )
     for warning in check(spec):
         click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
     return 0
 
 
-@cli.command(name="list", short_help='List the controllers, trajectories and disturbances.')
+@cli.command(name="list", short_help="List the controllers, trajectories and disturbances.")
 @click.argument("what", required=False, type=click.Choice(LISTS))
 def list_(what: str | None) -> int:
     """List the controllers, trajectories and disturbances a scenario can name."""
@@ -148,12 +173,25 @@ def list_(what: str | None) -> int:
 
 
 @cli.command(short_help="The paper's Table 1 and Figs. 10-17, over seeds, with intervals.")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/reproduce"), show_default=True,
-              help="Folder for table1.{md,csv,json} and figures/.")
-@click.option("--seeds", type=click.IntRange(min=1, max=1000), default=5, show_default=True,
-              help="Seeds per case (common random numbers across controllers).")
-@click.option("--ablations", is_flag=True, help="Add the NN variants: Jacobian source, error Jacobian, "
-              "no identification, no online learning.")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=Path("runs/reproduce"),
+    show_default=True,
+    help="Folder for table1.{md,csv,json} and figures/.",
+)
+@click.option(
+    "--seeds",
+    type=click.IntRange(min=1, max=1000),
+    default=5,
+    show_default=True,
+    help="Seeds per case (common random numbers across controllers).",
+)
+@click.option(
+    "--ablations",
+    is_flag=True,
+    help="Add the NN variants: Jacobian source, error Jacobian, no identification, no online learning.",
+)
 @overwrite_option
 def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
     """The paper's Table 1 and Figs. 10-17: backstepping vs NN-adaptive backstepping, both cases.
@@ -164,9 +202,8 @@ def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
 
     check_output(out, command="reproduce", overwrite=overwrite)
     enable_compilation_cache()
-    from .reproduce import nn_beats_backstepping
+    from .reproduce import nn_beats_backstepping, table_markdown
     from .reproduce import reproduce as run_reproduce
-    from .reproduce import table_markdown
 
     with staged_folder(out, command="reproduce") as stage:
         table = run_reproduce(stage, seeds=seeds, ablations=ablations)
@@ -179,41 +216,73 @@ def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
     return 0
 
 
-@cli.command(short_help='Monte Carlo: N seeds per controller, on common random numbers.')
+@cli.command(short_help="Monte Carlo: N seeds per controller, on common random numbers.")
 @click.argument("scenario", type=click.Path(path_type=Path))
 @click.option("-n", "n", type=click.IntRange(min=1, max=1_000_000), required=True, help="Runs per controller.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="First seed.")
-@click.option("--controllers", default="backstepping", show_default=True, metavar="A,B,...",
-              help="Controllers to compare on common random numbers; the first is the baseline.")
-@click.option("--vary", multiple=True, metavar="FIELD=DIST:SPREAD", help="Draw a plant parameter per run, "
-              "e.g. --vary mass=uniform:0.2 (repeatable).")
+@click.option(
+    "--controllers",
+    default="backstepping",
+    show_default=True,
+    metavar="A,B,...",
+    help="Controllers to compare on common random numbers; the first is the baseline.",
+)
+@click.option(
+    "--vary",
+    multiple=True,
+    metavar="FIELD=DIST:SPREAD",
+    help="Draw a plant parameter per run, e.g. --vary mass=uniform:0.2 (repeatable).",
+)
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a scenario value.")
-@click.option("--chunk", type=click.IntRange(min=1, max=100_000), default=64, show_default=True,
-              help="Runs per vmapped batch (bounds memory).")
+@click.option(
+    "--chunk",
+    type=click.IntRange(min=1, max=100_000),
+    default=64,
+    show_default=True,
+    help="Runs per vmapped batch (bounds memory).",
+)
 @click.option("--out", type=click.Path(path_type=Path), default=Path("runs/mc"), show_default=True)
 @overwrite_option
-def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...], overrides: tuple[str, ...],
-       chunk: int, out: Path, overwrite: bool) -> int:
+def mc(
+    scenario: Path,
+    n: int,
+    seed: int,
+    controllers: str,
+    vary: tuple[str, ...],
+    overrides: tuple[str, ...],
+    chunk: int,
+    out: Path,
+    overwrite: bool,
+) -> int:
     """Monte Carlo: N seeds of SCENARIO for each controller, on common random numbers."""
     from .outdir import check_output, staged_folder
 
     names = [c.strip() for c in controllers.split(",") if c.strip()]
     if not names or len(set(names)) != len(names):
-        raise ConfigError("--controllers", f"'{controllers}' must name distinct controllers, comma-separated",
-                          "e.g. --controllers backstepping,nn_adaptive_backstepping")
+        raise ConfigError(
+            "--controllers",
+            f"'{controllers}' must name distinct controllers, comma-separated",
+            "e.g. --controllers backstepping,nn_adaptive_backstepping",
+        )
     from .mc import format_summary, load_specs, run_specs, summarise, write
     from .scenario import MAX_SEED
 
     if seed + n - 1 > MAX_SEED:
-        raise ConfigError("--seed", f"seeds {seed} .. {seed + n - 1} pass the largest seed, {MAX_SEED}",
-                          "choose a smaller --seed")
+        raise ConfigError(
+            "--seed", f"seeds {seed} .. {seed + n - 1} pass the largest seed, {MAX_SEED}", "choose a smaller --seed"
+        )
 
     specs = load_specs(scenario, controllers=names, vary=vary, overrides=overrides)  # bad input: nothing written
     check_output(out, command="mc", overwrite=overwrite)
     enable_compilation_cache()
     with progress_bar(n * len(names), "runs") as advance:
-        rows = run_specs(specs, n=n, seed=seed, chunk_size=chunk,
-                         on_chunk=lambda name, done: advance(names.index(name) * n + done, name))
+        rows = run_specs(
+            specs,
+            n=n,
+            seed=seed,
+            chunk_size=chunk,
+            on_chunk=lambda name, done: advance(names.index(name) * n + done, name),
+        )
     summary = summarise(rows)
     with staged_folder(out, command="mc") as stage:
         write(stage, rows, summary)
@@ -221,33 +290,81 @@ def mc(scenario: Path, n: int, seed: int, controllers: str, vary: tuple[str, ...
     click.echo(f"wrote {out}/runs.parquet, runs.csv, summary.json")
     failed = sum(row["status"] != "ok" for runs in rows.values() for row in runs)
     if failed:  # exit 1, as for `run` and `sweep`: the results are written, with the failures among them
-        click.echo(f"{failed} of {n * len(names)} runs diverged or went non-finite (status column of runs.csv)", err=True)
+        click.echo(
+            f"{failed} of {n * len(names)} runs diverged or went non-finite (status column of runs.csv)", err=True
+        )
         return 1
     return 0
 
 
 @cli.command(short_help="Tune a controller's gains by gradient descent through rollouts.")
 @click.argument("scenarios", nargs=-1, required=True, metavar="SCENARIO...", type=click.Path(path_type=Path))
-@click.option("--controller", default="backstepping", show_default=True, metavar="NAME",
-              help="The controller whose constant gains are tuned.")
-@click.option("--seeds", type=click.IntRange(min=1, max=1000), default=4, show_default=True,
-              help="Training seeds per scenario (0 .. N-1), on common random numbers.")
-@click.option("--steps", type=click.IntRange(min=1, max=10_000), default=40, show_default=True,
-              help="Gradient iterations (Adam on log-gains).")
-@click.option("--learning-rate", type=click.FloatRange(min=0.0, min_open=True, max=10.0), default=0.1,
-              show_default=True, help="Adam step size in log-gain units.")
-@click.option("--effort-weight", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
-              help="Weight of the effort term: loss += W * integral of tau_R^2 + tau_L^2 [m^2 / (N^2 m^2)].")
-@click.option("--gamma", type=(float, float, float), default=(1.0, 1.0, 0.0), show_default=True,
-              metavar="GX GY GTHETA", help="Weights of (e_x, e_y, e_theta) in the cost eq. 22; the default is e_tr^2.")
+@click.option(
+    "--controller",
+    default="backstepping",
+    show_default=True,
+    metavar="NAME",
+    help="The controller whose constant gains are tuned.",
+)
+@click.option(
+    "--seeds",
+    type=click.IntRange(min=1, max=1000),
+    default=4,
+    show_default=True,
+    help="Training seeds per scenario (0 .. N-1), on common random numbers.",
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(min=1, max=10_000),
+    default=40,
+    show_default=True,
+    help="Gradient iterations (Adam on log-gains).",
+)
+@click.option(
+    "--learning-rate",
+    type=click.FloatRange(min=0.0, min_open=True, max=10.0),
+    default=0.1,
+    show_default=True,
+    help="Adam step size in log-gain units.",
+)
+@click.option(
+    "--effort-weight",
+    type=click.FloatRange(min=0.0),
+    default=0.0,
+    show_default=True,
+    help="Weight of the effort term: loss += W * integral of tau_R^2 + tau_L^2 [m^2 / (N^2 m^2)].",
+)
+@click.option(
+    "--gamma",
+    type=(float, float, float),
+    default=(1.0, 1.0, 0.0),
+    show_default=True,
+    metavar="GX GY GTHETA",
+    help="Weights of (e_x, e_y, e_theta) in the cost eq. 22; the default is e_tr^2.",
+)
 @click.option("--whole-run", is_flag=True, help="Sum the cost over the whole run, not the scenario's metric window.")
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override every scenario.")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/tune"), show_default=True,
-              help="Folder for tuned.toml, loss.csv, loss.png, tune.json.")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=Path("runs/tune"),
+    show_default=True,
+    help="Folder for tuned.toml, loss.csv, loss.png, tune.json.",
+)
 @overwrite_option
-def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, learning_rate: float,
-         effort_weight: float, gamma: tuple[float, float, float], whole_run: bool, overrides: tuple[str, ...],
-         out: Path, overwrite: bool) -> int:
+def tune(
+    scenarios: tuple[Path, ...],
+    controller: str,
+    seeds: int,
+    steps: int,
+    learning_rate: float,
+    effort_weight: float,
+    gamma: tuple[float, float, float],
+    whole_run: bool,
+    overrides: tuple[str, ...],
+    out: Path,
+    overwrite: bool,
+) -> int:
     """Tune a controller's constant gains by gradient descent through whole simulated rollouts of SCENARIO...
     (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
     from .outdir import check_output, staged_folder
@@ -256,7 +373,9 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     from .tune import tune as run_tuning
 
     if controller not in TUNABLE:
-        raise ConfigError("--controller", f"'{controller}' has no tunable gains", f"choose one of: {', '.join(TUNABLE)}")
+        raise ConfigError(
+            "--controller", f"'{controller}' has no tunable gains", f"choose one of: {', '.join(TUNABLE)}"
+        )
     if min(gamma) < 0 or max(gamma) == 0:
         raise ConfigError("--gamma", f"{gamma} must be >= 0 and not all 0", "e.g. --gamma 1 1 0 (the squared e_tr)")
     specs = [load_scenario(path, overrides=overrides, controller=controller) for path in scenarios]
@@ -265,28 +384,57 @@ def tune(scenarios: tuple[Path, ...], controller: str, seeds: int, steps: int, l
     initial = specs[0].controller.gains
     with progress_bar(steps + 1, "tuning") as advance:
         training = problems(specs, range(seeds))
-        result = run_tuning(training, initial, steps=steps, learning_rate=learning_rate, effort_weight=effort_weight,
-                            gamma=gamma, whole_run=whole_run, on_step=lambda record: advance(record["step"] + 1))
-    settings = {"scenarios": [str(p) for p in scenarios], "controller": controller, "seeds": seeds, "steps": steps,
-                "learning_rate": learning_rate, "effort_weight": effort_weight, "whole_run": whole_run, "gamma": list(gamma),
-                "overrides": list(overrides), "initial_gains": list(initial)}
+        result = run_tuning(
+            training,
+            initial,
+            steps=steps,
+            learning_rate=learning_rate,
+            effort_weight=effort_weight,
+            gamma=gamma,
+            whole_run=whole_run,
+            on_step=lambda record: advance(record["step"] + 1),
+        )
+    settings = {
+        "scenarios": [str(p) for p in scenarios],
+        "controller": controller,
+        "seeds": seeds,
+        "steps": steps,
+        "learning_rate": learning_rate,
+        "effort_weight": effort_weight,
+        "whole_run": whole_run,
+        "gamma": list(gamma),
+        "overrides": list(overrides),
+        "initial_gains": list(initial),
+    }
     with staged_folder(out, command="tune") as stage:
         write(stage, result, controller, settings)
-    click.echo(f"gains {', '.join(f'{g:.4g}' for g in initial)} -> {', '.join(f'{g:.4g}' for g in result.gains)}; "
-               f"loss {result.initial_loss:.4g} -> {result.final_loss:.4g} "
-               f"({100 * (1 - result.final_loss / result.initial_loss):.1f} % lower)")
+    click.echo(
+        f"gains {', '.join(f'{g:.4g}' for g in initial)} -> {', '.join(f'{g:.4g}' for g in result.gains)}; "
+        f"loss {result.initial_loss:.4g} -> {result.final_loss:.4g} "
+        f"({100 * (1 - result.final_loss / result.initial_loss):.1f} % lower)"
+    )
     click.echo(f"wrote {out}/tuned.toml, loss.csv, loss.png, tune.json")
     return 0
 
 
-@cli.command(short_help='Run a parameter sweep (SWEEP.toml) on Dask, resumably.')
+@cli.command(short_help="Run a parameter sweep (SWEEP.toml) on Dask, resumably.")
 @click.argument("sweep_file", metavar="SWEEP.toml", type=click.Path(path_type=Path))
-@click.option("--out", type=click.Path(path_type=Path), required=True,
-              help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Result folder: records/<key>.json, results.parquet, results.csv. Rerun to resume.",
+)
 @overwrite_option
 @cluster_options
-def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, scheduler_file: Path | None,
-          workers: int | None) -> int:
+def sweep(
+    sweep_file: Path,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
     """Run a parameter sweep (SWEEP.toml, see docs/sweeps.md) on Dask, resumably.
 
     Without --scheduler or --scheduler-file, an embedded cluster on 127.0.0.1 runs it.
@@ -303,25 +451,45 @@ def sweep(sweep_file: Path, out: Path, overwrite: bool, scheduler: str | None, s
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(len(plan.runs), "runs") as advance:
         start_resumable(out, command="sweep", study=study, resume=resume)
         outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done))
-    click.echo(f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
-               f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
-               f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors")
+    click.echo(
+        f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
+        f"{outcome.reused} found in {out}/records, {outcome.ran} run; "
+        f"{outcome.not_ok} diverged or non-finite, {outcome.errors} errors"
+    )
     if outcome.warnings:
         click.echo("warnings: " + ", ".join(f"{code} x {count}" for code, count in outcome.warnings.items()))
     click.echo(f"wrote {out}/results.parquet, results.csv")
     return 1 if outcome.errors or outcome.not_ok else 0
 
 
-@cli.command(short_help='Rank controllers over trajectories, uncertainty levels and seeds.')
-@click.option("--suite", "suite_name", type=click.Choice(["quick", "standard"]), default="quick", show_default=True,
-              help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds.")
+@cli.command(short_help="Rank controllers over trajectories, uncertainty levels and seeds.")
+@click.option(
+    "--suite",
+    "suite_name",
+    type=click.Choice(["quick", "standard"]),
+    default="quick",
+    show_default=True,
+    help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds.",
+)
 @click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("runs/bench"), show_default=True,
-              help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=Path("runs/bench"),
+    show_default=True,
+    help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.",
+)
 @overwrite_option
 @cluster_options
-def bench(suite_name: str, controllers: str | None, out: Path, overwrite: bool, scheduler: str | None,
-          scheduler_file: Path | None, workers: int | None) -> int:
+def bench(
+    suite_name: str,
+    controllers: str | None,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
     """Rank controllers over trajectories, uncertainty levels and seeds on common random numbers, with a
     robustness map over mass and friction; see docs/benchmarks.md."""
     check_cluster_options(scheduler, scheduler_file, workers)
@@ -335,24 +503,38 @@ def bench(suite_name: str, controllers: str | None, out: Path, overwrite: bool, 
     enable_compilation_cache()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
-        summary = run_suite(SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total))
+        summary = run_suite(
+            SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total)
+        )
     from .sweep import read_records
 
     click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
-    click.echo(f"{summary['runs']} runs ({summary['reused']} reused), {summary['not_ok']} diverged or non-finite, "
-               f"{summary['errors']} errors; wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, "
-               "robustness.png, boxplots.png")
+    click.echo(
+        f"{summary['runs']} runs ({summary['reused']} reused), {summary['not_ok']} diverged or non-finite, "
+        f"{summary['errors']} errors; wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, "
+        "robustness.png, boxplots.png"
+    )
     return 1 if summary["errors"] else 0
 
 
-@cli.command(short_help='Animate a run folder: the robot following its reference.')
+@cli.command(short_help="Animate a run folder: the robot following its reference.")
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
-@click.option("--out", type=click.Path(path_type=Path), metavar="FILE",
-              help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH) [default: DIR/animation.gif].")
-@click.option("--fps", type=click.IntRange(min=1, max=50), default=20, show_default=True,
-              help="Frames per second of playback.")
-@click.option("--speed", type=click.FloatRange(min=0.01, max=1000.0), default=2.0, show_default=True,
-              help="Simulated seconds per second of playback (1 = real time).")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    metavar="FILE",
+    help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH) [default: DIR/animation.gif].",
+)
+@click.option(
+    "--fps", type=click.IntRange(min=1, max=50), default=20, show_default=True, help="Frames per second of playback."
+)
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0.01, max=1000.0),
+    default=2.0,
+    show_default=True,
+    help="Simulated seconds per second of playback (1 = real time).",
+)
 def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
     """Animate the run folder DIR (from `ddtrack run`): the robot's footprint following the reference with its
     trail, and the adapted gains beside it when they moved. At most 600 frames: a longer run plays faster."""
@@ -364,13 +546,20 @@ def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
     out = out if out is not None else folder / "animation.gif"
     check_writable(out.parent)
     plant = spec.plant_params()  # the true robot's geometry
-    info = write_animation(columns, out, half_axle=plant.half_axle, wheel_radius=plant.wheel_radius, fps=fps,
-                           speed=speed, title=f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}")
+    info = write_animation(
+        columns,
+        out,
+        half_axle=plant.half_axle,
+        wheel_radius=plant.wheel_radius,
+        fps=fps,
+        speed=speed,
+        title=f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}",
+    )
     click.echo(f"wrote {out}: {info.frames} frames at {fps} fps, {info.speed:.3g} x real time")
     return 0
 
 
-@cli.command(short_help='Print the JSON Schema (or Markdown reference) of scenario files.')
+@cli.command(short_help="Print the JSON Schema (or Markdown reference) of scenario files.")
 @click.option("--markdown", is_flag=True, help="Print the Markdown reference (docs/reference.md) instead.")
 def schema(markdown: bool) -> int:
     """Print the JSON Schema of scenario files (every key, its type, default, bounds and unit)."""
@@ -382,9 +571,11 @@ def schema(markdown: bool) -> int:
     return 0
 
 
-@cli.command(short_help='Write a self-contained HTML report of a result folder.')
+@cli.command(short_help="Write a self-contained HTML report of a result folder.")
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
-@click.option("--out", type=click.Path(path_type=Path), metavar="FILE", help="The HTML file [default: DIR/report.html].")
+@click.option(
+    "--out", type=click.Path(path_type=Path), metavar="FILE", help="The HTML file [default: DIR/report.html]."
+)
 def report(folder: Path, out: Path | None) -> int:
     """Write one self-contained HTML page (inline CSS and SVG; no script, no external resource: it opens
     offline) for a run, reproduce, mc or bench folder DIR: the scenario, the metrics, the figures, the gains, and
@@ -400,16 +591,35 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
     """A rich progress bar on stderr, yielding ``advance(completed, label=None)``; silent when stderr is not a
     terminal, so logs, pipes and CI stay clean."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     console = Console(stderr=True)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  TextColumn("eta"), TimeRemainingColumn(), console=console, disable=not console.is_terminal) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
+        console=console,
+        disable=not console.is_terminal,
+    ) as bar:
         task = bar.add_task(label, total=total)
 
         def advance(completed: int, description: str | None = None, total: int | None = None) -> None:
-            bar.update(task, completed=completed, description=description or label,
-                       **({} if total is None else {"total": total}))
+            bar.update(
+                task,
+                completed=completed,
+                description=description or label,
+                **({} if total is None else {"total": total}),
+            )
 
         yield advance
 
@@ -444,8 +654,9 @@ def enable_compilation_cache() -> None:
 
 def one_device_per_core(jax) -> None:
     """One JAX CPU device per usable core (called once JAX is imported)."""
-    jax.config.update("jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                      else os.cpu_count() or 1)
+    jax.config.update(
+        "jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    )
 
 
 def entry_point() -> None:

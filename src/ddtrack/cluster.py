@@ -1,5 +1,6 @@
 """Where ``sweep`` and ``bench`` run: their cluster options, checked before anything runs, and the Dask client
 of a running scheduler or of an embedded cluster on 127.0.0.1."""
+
 from __future__ import annotations
 
 import os
@@ -13,13 +14,24 @@ from .errors import ConfigError, RunError
 
 
 def cluster_options(command: Callable) -> Callable:
-    """The options that choose where ``sweep`` and ``bench`` run: ``--scheduler``, ``--scheduler-file``, ``--workers``."""
+    """The options that choose where ``sweep`` and ``bench`` run.
+
+    They are ``--scheduler``, ``--scheduler-file`` and ``--workers``.
+    """
     options = [
         click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tls://10.0.0.5:8786."),
-        click.option("--scheduler-file", type=click.Path(path_type=Path), metavar="FILE",
-                     help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file)."),
-        click.option("--workers", type=click.IntRange(min=1, max=1024), metavar="N",
-                     help="Worker processes of the embedded local cluster [default: CPU count]."),
+        click.option(
+            "--scheduler-file",
+            type=click.Path(path_type=Path),
+            metavar="FILE",
+            help="Use the running Dask scheduler described by FILE (dask scheduler --scheduler-file).",
+        ),
+        click.option(
+            "--workers",
+            type=click.IntRange(min=1, max=1024),
+            metavar="N",
+            help="Worker processes of the embedded local cluster [default: CPU count].",
+        ),
     ]
     for option in reversed(options):  # decorators apply bottom-up: keep the options in this order in --help
         command = option(command)
@@ -31,11 +43,17 @@ def check_cluster_options(scheduler: str | None, scheduler_file: Path | None, wo
     if scheduler is not None and scheduler_file is not None:
         raise ConfigError("--scheduler", "give --scheduler or --scheduler-file, not both")
     if workers is not None and (scheduler is not None or scheduler_file is not None):
-        raise ConfigError("--workers", "only applies to the embedded cluster",
-                          "start workers on the cluster with `dask worker` instead")
+        raise ConfigError(
+            "--workers",
+            "only applies to the embedded cluster",
+            "start workers on the cluster with `dask worker` instead",
+        )
     if scheduler_file is not None and not scheduler_file.is_file():
-        raise ConfigError("--scheduler-file", f"'{scheduler_file}' does not exist",
-                          "start the scheduler with `dask scheduler --scheduler-file FILE` first")
+        raise ConfigError(
+            "--scheduler-file",
+            f"'{scheduler_file}' does not exist",
+            "start the scheduler with `dask scheduler --scheduler-file FILE` first",
+        )
 
 
 @contextmanager
@@ -49,8 +67,9 @@ def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int
     try:
         if scheduler is not None or scheduler_file is not None:
             try:
-                client = Client(scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file),
-                                timeout="20s")
+                client = Client(
+                    scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), timeout="20s"
+                )
             except (OSError, TimeoutError) as exc:
                 raise RunError(f"cannot reach the Dask scheduler ({exc})") from None
         else:

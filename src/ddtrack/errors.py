@@ -1,4 +1,5 @@
 """Exceptions. User mistakes are :class:`ConfigError` (exit code 2), never a traceback."""
+
 from __future__ import annotations
 
 import difflib

@@ -6,6 +6,7 @@ for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a rob
 masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams). It returns
 warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp.
 """
+
 from __future__ import annotations
 
 import math
@@ -71,23 +72,36 @@ def check_clamps(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
     """Refuse a reference at or above the controller's clamps; warn within 10 % of them."""
     controller, warnings = scenario.controller, []
     limits = (getattr(controller, "max_velocity", None), getattr(controller, "max_yaw_rate", None))
-    names = (("speed", "m/s", "controller.max_velocity", _speed_field(scenario)),
-             ("yaw rate", "rad/s", "controller.max_yaw_rate", "trajectory"))
+    names = (
+        ("speed", "m/s", "controller.max_velocity", _speed_field(scenario)),
+        ("yaw rate", "rad/s", "controller.max_yaw_rate", "trajectory"),
+    )
     for peak, limit, (what, unit, clamp, field) in zip(peaks, limits, names, strict=True):
         if limit is None:
             continue
         if peak >= limit:
-            hint = (f"slow the reference below {NEAR_LIMIT * limit:.3g} {unit}, or raise {clamp} to what your robot "
-                    "can really do")
+            hint = (
+                f"slow the reference below {NEAR_LIMIT * limit:.3g} {unit}, or raise {clamp} to what your robot "
+                "can really do"
+            )
             if what == "speed" and peak / 3.6 < limit:
                 hint += f" (if {peak:g} was meant in km/h, that is {peak / 3.6:.3g} m/s)"
-            raise ConfigError(field, f"the reference's {what} reaches {peak:.3g} {unit}, at or above {clamp} = "
-                              f"{limit:g} {unit}: the robot cannot follow it and would run saturated, off the path",
-                              hint)
+            raise ConfigError(
+                field,
+                f"the reference's {what} reaches {peak:.3g} {unit}, at or above {clamp} = "
+                f"{limit:g} {unit}: the robot cannot follow it and would run saturated, off the path",
+                hint,
+            )
         if peak > NEAR_LIMIT * limit:
-            warnings.append({"code": "reference_near_limit", "message": (
-                f"the reference's {what} reaches {peak:.3g} {unit}, {100 * peak / limit:.3g} % of {clamp} = "
-                f"{limit:g} {unit}: little is left for the feedback to correct errors")})
+            warnings.append(
+                {
+                    "code": "reference_near_limit",
+                    "message": (
+                        f"the reference's {what} reaches {peak:.3g} {unit}, {100 * peak / limit:.3g} % of {clamp} = "
+                        f"{limit:g} {unit}: little is left for the feedback to correct errors"
+                    ),
+                }
+            )
     return warnings
 
 
@@ -100,8 +114,11 @@ def check_angles(scenario: Any) -> None:
         angles.append(("initial.pose[2]", scenario.initial.pose[2]))
     for field, angle in angles:
         if abs(angle) > 2.0 * math.pi:
-            raise ConfigError(field, f"{angle:g} rad is more than a full turn: angles are in radians",
-                              f"if you meant {angle:g} degrees, write {math.radians(angle):.10g}")
+            raise ConfigError(
+                field,
+                f"{angle:g} rad is more than a full turn: angles are in radians",
+                f"if you meant {angle:g} degrees, write {math.radians(angle):.10g}",
+            )
 
 
 def check_units(scenario: Any) -> None:
@@ -109,11 +126,15 @@ def check_units(scenario: Any) -> None:
     for section, params in (("robot", scenario.robot.params()), ("plant", scenario.plant_params())):
         gyration = math.sqrt(params.inertia / params.mass) / params.half_axle
         if not GYRATION_RANGE[0] <= gyration <= GYRATION_RANGE[1]:
-            raise ConfigError(f"{section}.mass, {section}.inertia", (
-                f"{params.mass:g} kg with inertia {params.inertia:g} kg m^2 gives a radius of gyration "
-                f"{math.sqrt(params.inertia / params.mass):.3g} m, {gyration:.3g} times the half axle "
-                f"{params.half_axle:g} m; a robot's lies within about 0.2 to 2 times"),
-                "masses are in kg (not g) and inertias in kg m^2 (about m (0.5 L)^2 for a compact robot)")
+            raise ConfigError(
+                f"{section}.mass, {section}.inertia",
+                (
+                    f"{params.mass:g} kg with inertia {params.inertia:g} kg m^2 gives a radius of gyration "
+                    f"{math.sqrt(params.inertia / params.mass):.3g} m, {gyration:.3g} times the half axle "
+                    f"{params.half_axle:g} m; a robot's lies within about 0.2 to 2 times"
+                ),
+                "masses are in kg (not g) and inertias in kg m^2 (about m (0.5 L)^2 for a compact robot)",
+            )
 
 
 def check(scenario: Any) -> list[dict]:

@@ -1,4 +1,5 @@
 """Planar geometry shared by the model, the controllers and the metrics (model.md §0, 2.2)."""
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -32,11 +33,13 @@ def posture_error(x: Array, y: Array, theta: Array, x_r: Array, y_r: Array, thet
 def error_rates(error: Array, v: Array, omega: Array, v_r: Array, omega_r: Array) -> Array:
     """Kanayama error dynamics d/dt [e_x, e_y, e_theta] (model.md §2.3)."""
     e_x, e_y, e_theta = error[0], error[1], error[2]
-    return jnp.stack([
-        omega * e_y - v + v_r * jnp.cos(e_theta),
-        -omega * e_x + v_r * jnp.sin(e_theta),
-        omega_r - omega,
-    ])
+    return jnp.stack(
+        [
+            omega * e_y - v + v_r * jnp.cos(e_theta),
+            -omega * e_x + v_r * jnp.sin(e_theta),
+            omega_r - omega,
+        ]
+    )
 
 
 def body_increment(pose: Array, next_pose: Array) -> Array:

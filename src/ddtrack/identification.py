@@ -5,6 +5,7 @@ reference with a small command dither on the *true* plant, collect the transitio
 (z_k = [nu_c(k), nu(k)], body-frame increment of q_k -> q_k+1), and train the emulator for N_c
 shuffled epochs of per-sample backpropagation with momentum.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -36,61 +37,105 @@ REFERENCE_PEAKS = (0.9, 0.7)
 CLAMP_MARGIN = 0.8
 
 
-def identification_scale(max_velocity: float, max_yaw_rate: float,
-                         peaks: tuple[float, float] | None = None) -> tuple[float, float]:
+def identification_scale(
+    max_velocity: float, max_yaw_rate: float, peaks: tuple[float, float] | None = None
+) -> tuple[float, float]:
     """(k_v, k_omega): how much to shrink the exciting reference, the dither and the emulator's scales so that
     the identification stays inside the clamps. Data taken against a clamp says nothing about the command's
     effect, so a robot slower than the paper's would otherwise learn nothing. ``peaks`` overrides the peak
     (speed, yaw rate); by default min(0.9, 0.8 v_max) and min(0.7, 0.8 omega_max), i.e. 1 for the paper's robot."""
     if peaks is None:
-        peaks = (min(REFERENCE_PEAKS[0], CLAMP_MARGIN * max_velocity),
-                 min(REFERENCE_PEAKS[1], CLAMP_MARGIN * max_yaw_rate))
+        peaks = (
+            min(REFERENCE_PEAKS[0], CLAMP_MARGIN * max_velocity),
+            min(REFERENCE_PEAKS[1], CLAMP_MARGIN * max_yaw_rate),
+        )
     return peaks[0] / REFERENCE_PEAKS[0], peaks[1] / REFERENCE_PEAKS[1]
 
 
-def exciting_reference(duration: float, control_period: float, scale: tuple[float, float] = (1.0, 1.0)
-                       ) -> SampledTrajectory:
+def exciting_reference(
+    duration: float, control_period: float, scale: tuple[float, float] = (1.0, 1.0)
+) -> SampledTrajectory:
     """v_r = k_v (0.5 + 0.3 sin 0.3t + 0.1 sin(1.3t + 1)), omega_r = k_omega (0.4 sin 0.5t + 0.3 sin 1.7t)
     (model.md §3.7 at k = 1): speeds in k_v [0.1, 0.9] m/s and yaw rates in k_omega [-0.7, 0.7] rad/s."""
     k_v, k_w = scale
     return unicycle_reference(
         lambda t: k_v * (0.5 + 0.3 * jnp.sin(0.3 * t) + 0.1 * jnp.sin(1.3 * t + 1.0)),
         lambda t: k_w * (0.4 * jnp.sin(0.5 * t) + 0.3 * jnp.sin(1.7 * t)),
-        duration=duration, step=control_period,
+        duration=duration,
+        step=control_period,
     )
 
 
-def collect(plant: RobotParams, inner: object, emulator: Emulator, key: Array, *, duration: float,
-            control_period: float, substeps: int, dither: Array, gains: Array, limits: Array,
-            disturbance: WheelDisturbance, noise: MeasurementNoise, reference_scale: tuple[float, float] = (1.0, 1.0)
-            ) -> tuple[Array, Array]:
+def collect(
+    plant: RobotParams,
+    inner: object,
+    emulator: Emulator,
+    key: Array,
+    *,
+    duration: float,
+    control_period: float,
+    substeps: int,
+    dither: Array,
+    gains: Array,
+    limits: Array,
+    disturbance: WheelDisturbance,
+    noise: MeasurementNoise,
+    reference_scale: tuple[float, float] = (1.0, 1.0),
+) -> tuple[Array, Array]:
     """Run the identification experiment; return inputs z (n, n_in) and targets (n, 3) [physical units]."""
     trajectory = exciting_reference(duration, control_period, reference_scale)
-    outer = Dithered(Backstepping(kx=gains[0], ky=gains[1], ktheta=gains[2], max_velocity=limits[0],
-                                  max_yaw_rate=limits[1]), std=dither)
+    outer = Dithered(
+        Backstepping(kx=gains[0], ky=gains[1], ktheta=gains[2], max_velocity=limits[0], max_yaw_rate=limits[1]),
+        std=dither,
+    )
     n = round(duration / control_period)
     k_dist, k_noise, k_ctrl = jax.random.split(key, 3)
     draws = Draws(jax.random.normal(k_dist, (n, 2)), jax.random.normal(k_noise, (n, 5)), k_ctrl)
     ref0 = trajectory(0.0)
     x0 = jnp.stack([ref0.x, ref0.y, ref0.theta, 0.0, 0.0])
-    result = simulate(DynamicPlant(plant), Cascade(outer, inner), trajectory, x0, draws, n_steps=n,
-                      control_period=control_period, substeps=substeps, disturbance=disturbance, noise=noise)
+    result = simulate(
+        DynamicPlant(plant),
+        Cascade(outer, inner),
+        trajectory,
+        x0,
+        draws,
+        n_steps=n,
+        control_period=control_period,
+        substeps=substeps,
+        disturbance=disturbance,
+        noise=noise,
+    )
     nu_c = jnp.stack([result.logs["v_cmd"], result.logs["omega_cmd"]], axis=1)
     z = jax.vmap(emulator.inputs)(nu_c, result.state[:, 3:5])[:-1]
     targets = jax.vmap(body_increment)(result.state[:-1, :3], result.state[1:, :3])
     return z, targets
 
 
-def train(emulator: Emulator, z: Array, targets: Array, key: Array, *, epochs: int, learning_rate: float,
-          momentum: float, clip_norm: float) -> tuple[Emulator, Array]:
+def train(
+    emulator: Emulator,
+    z: Array,
+    targets: Array,
+    key: Array,
+    *,
+    epochs: int,
+    learning_rate: float,
+    momentum: float,
+    clip_norm: float,
+) -> tuple[Emulator, Array]:
     """``epochs`` shuffled passes of per-sample momentum SGD; returns the emulator and the epoch losses."""
     zn, tn = z / emulator.scales.inputs, targets / emulator.scales.outputs
 
     def sample_step(carry, i):
         mlp, velocity = carry
         loss = sample_loss(mlp, zn[i], tn[i])
-        mlp, velocity = momentum_step(mlp, velocity, backprop(mlp, zn[i], tn[i]), learning_rate=learning_rate,
-                                      momentum=momentum, clip_norm=clip_norm)
+        mlp, velocity = momentum_step(
+            mlp,
+            velocity,
+            backprop(mlp, zn[i], tn[i]),
+            learning_rate=learning_rate,
+            momentum=momentum,
+            clip_norm=clip_norm,
+        )
         return (mlp, velocity), loss
 
     def epoch(carry, epoch_key):
@@ -108,21 +153,54 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
     return jnp.mean((predictions - targets) ** 2, axis=0) / jnp.var(targets, axis=0)
 
 
-def identify(plant: RobotParams, inner: object, emulator: Emulator, key: Array, *, duration: float = 60.0,
-             epochs: int = 100, control_period: float = 0.01, substeps: int = 10, dither: Array = (0.05, 0.1),
-             gains: Array = (1.0, 55.0, 15.0), limits: Array = (2.0, 4.0), learning_rate: float = 0.2,
-             momentum: float = 0.3, clip_norm: float = 5.0, disturbance: WheelDisturbance = WheelDisturbance(),
-             noise: MeasurementNoise = MeasurementNoise(), reference_scale: tuple[float, float] = (1.0, 1.0)
-             ) -> Identification:
+def identify(
+    plant: RobotParams,
+    inner: object,
+    emulator: Emulator,
+    key: Array,
+    *,
+    duration: float = 60.0,
+    epochs: int = 100,
+    control_period: float = 0.01,
+    substeps: int = 10,
+    dither: Array = (0.05, 0.1),
+    gains: Array = (1.0, 55.0, 15.0),
+    limits: Array = (2.0, 4.0),
+    learning_rate: float = 0.2,
+    momentum: float = 0.3,
+    clip_norm: float = 5.0,
+    disturbance: WheelDisturbance = WheelDisturbance(),
+    noise: MeasurementNoise = MeasurementNoise(),
+    reference_scale: tuple[float, float] = (1.0, 1.0),
+) -> Identification:
     """Collect identification data on ``plant`` and train ``emulator`` on it (model.md §3.7 schedule, step 1);
     ``reference_scale`` is :func:`identification_scale`'s (k_v, k_omega)."""
     k_data, k_train = jax.random.split(key)
-    z, targets = collect(plant, inner, emulator, k_data, duration=duration, control_period=control_period,
-                         substeps=substeps, dither=jnp.asarray(dither, float), gains=jnp.asarray(gains, float),
-                         limits=jnp.asarray(limits, float), disturbance=disturbance, noise=noise,
-                         reference_scale=reference_scale)
-    trained, losses = _train_jit(emulator, z, targets, k_train, epochs=epochs, learning_rate=learning_rate,
-                                 momentum=momentum, clip_norm=clip_norm)
+    z, targets = collect(
+        plant,
+        inner,
+        emulator,
+        k_data,
+        duration=duration,
+        control_period=control_period,
+        substeps=substeps,
+        dither=jnp.asarray(dither, float),
+        gains=jnp.asarray(gains, float),
+        limits=jnp.asarray(limits, float),
+        disturbance=disturbance,
+        noise=noise,
+        reference_scale=reference_scale,
+    )
+    trained, losses = _train_jit(
+        emulator,
+        z,
+        targets,
+        k_train,
+        epochs=epochs,
+        learning_rate=learning_rate,
+        momentum=momentum,
+        clip_norm=clip_norm,
+    )
     return Identification(trained, losses, prediction_nmse(trained, z, targets), int(z.shape[0]))
 
 

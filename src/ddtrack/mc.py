@@ -1,5 +1,6 @@
 """``ddtrack mc``: Monte Carlo over seeds (and drawn plant parameters) for several controllers, on
 common random numbers: seed s gives every controller the same plant, disturbance and noise."""
+
 from __future__ import annotations
 
 import io
@@ -8,7 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.csv  # noqa: F401  (pa.csv)
+import pyarrow.csv
 import pyarrow.parquet as pq
 
 from ._format import significant, with_interval
@@ -26,25 +27,37 @@ def vary_override(spec: str) -> str:
     field, sep, rest = spec.partition("=")
     parts = rest.split(":")
     if not sep or len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] not in ("relative", "absolute")):
-        raise ConfigError("--vary", f"'{spec}' is not FIELD=DISTRIBUTION:SPREAD[:absolute]",
-                          "e.g. --vary mass=uniform:0.2 (plus or minus 20 %) or --vary com_offset=normal:0.01:absolute")
+        raise ConfigError(
+            "--vary",
+            f"'{spec}' is not FIELD=DISTRIBUTION:SPREAD[:absolute]",
+            "e.g. --vary mass=uniform:0.2 (plus or minus 20 %) or --vary com_offset=normal:0.01:absolute",
+        )
     kind = parts[2] if len(parts) == 3 else "relative"
     return f'randomize.{field.strip()}={{distribution="{parts[0]}", {kind}={parts[1]}}}'
 
 
-def load_specs(scenario: Path, *, controllers: Sequence[str], vary: Sequence[str] = (),
-               overrides: Sequence[str] = ()) -> dict[str, Scenario]:
+def load_specs(
+    scenario: Path, *, controllers: Sequence[str], vary: Sequence[str] = (), overrides: Sequence[str] = ()
+) -> dict[str, Scenario]:
     """The scenario once per controller, with the overrides and the ``--vary`` draws applied."""
     extra = [*overrides, *(vary_override(v) for v in vary)]
     return {name: load_scenario(scenario, overrides=extra, controller=name) for name in controllers}
 
 
-def run_specs(specs: dict[str, Scenario], *, n: int, seed: int = 0, chunk_size: int = 64,
-              on_chunk: Callable[[str, int], None] = lambda name, done: None) -> dict[str, list[dict]]:
+def run_specs(
+    specs: dict[str, Scenario],
+    *,
+    n: int,
+    seed: int = 0,
+    chunk_size: int = 64,
+    on_chunk: Callable[[str, int], None] = lambda name, done: None,
+) -> dict[str, list[dict]]:
     """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.runner.monte_carlo`)."""
     seeds = list(range(seed, seed + n))
-    return {name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=lambda done, name=name: on_chunk(name, done))
-            for name, spec in specs.items()}
+    return {
+        name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=lambda done, name=name: on_chunk(name, done))
+        for name, spec in specs.items()
+    }
 
 
 def summarise(rows: dict[str, list[dict]]) -> dict:
@@ -54,14 +67,20 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
     baseline = rows[names[0]]
     summary: dict = {"controllers": {}, "improvement_over": names[0], "improvement": {}}
     for name, runs in rows.items():
-        summary["controllers"][name] = {key: mean_ci([r[key] for r in runs], domain=METRIC_DOMAINS[key])
-                                         for key in STATISTICS}
+        summary["controllers"][name] = {
+            key: mean_ci([r[key] for r in runs], domain=METRIC_DOMAINS[key]) for key in STATISTICS
+        }
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
         summary["controllers"][name]["warnings"] = warning_counts(runs)
         if name != names[0]:
-            paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) for b, r in zip(baseline, runs, strict=True)
-                      if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0]
-            summary["improvement"][name] = mean_ci(paired, domain=METRIC_DOMAINS["improvement"]) | {"paired_runs": len(paired)}
+            paired = [
+                improvement(b["e_tr_mean"], r["e_tr_mean"])
+                for b, r in zip(baseline, runs, strict=True)
+                if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0
+            ]
+            summary["improvement"][name] = mean_ci(paired, domain=METRIC_DOMAINS["improvement"]) | {
+                "paired_runs": len(paired)
+            }
     return summary
 
 
@@ -73,10 +92,20 @@ def table(rows: dict[str, list[dict]]) -> pa.Table:
         for r in runs:
             flat = {k: v for k, v in r.items() if k not in ("window", "final_gains", "failure_time", "warnings")}
             gains = r.get("final_gains") or [None, None, None]
-            records.append({"controller": name, **flat, "window_start": r["window"][0], "window_end": r["window"][1],
-                            "failure_time": r.get("failure_time"), "final_kx": gains[0], "final_ky": gains[1],
-                            "final_ktheta": gains[2], "warning_codes": ",".join(w["code"] for w in r["warnings"]),
-                            "warnings": " | ".join(w["message"] for w in r["warnings"])})
+            records.append(
+                {
+                    "controller": name,
+                    **flat,
+                    "window_start": r["window"][0],
+                    "window_end": r["window"][1],
+                    "failure_time": r.get("failure_time"),
+                    "final_kx": gains[0],
+                    "final_ky": gains[1],
+                    "final_ktheta": gains[2],
+                    "warning_codes": ",".join(w["code"] for w in r["warnings"]),
+                    "warnings": " | ".join(w["message"] for w in r["warnings"]),
+                }
+            )
     return pa.Table.from_pylist(records)
 
 
@@ -87,7 +116,9 @@ def write(out: Path, rows: dict[str, list[dict]], summary: dict) -> None:
     csv_buffer = io.BytesIO()
     pa.csv.write_csv(runs, csv_buffer)
     atomic_write(out / "runs.csv", lambda f: f.write(csv_buffer.getvalue()))
-    atomic_write(out / "summary.json", lambda f: f.write((json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()))
+    atomic_write(
+        out / "summary.json", lambda f: f.write((json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
+    )
 
 
 def format_summary(summary: dict, n: int) -> str:
@@ -103,17 +134,22 @@ def format_summary(summary: dict, n: int) -> str:
             text = f"{with_interval(e['mean'], e['ci_low'], e['ci_high'])} m"
         saturated = stats["saturation_fraction"]
         scaled = [None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")]
-        lines.append(f"  {name:<26} e_tr_mean {text}; saturated {with_interval(*scaled)} %; "
-                     f"failures {stats['failures']}")
+        lines.append(
+            f"  {name:<26} e_tr_mean {text}; saturated {with_interval(*scaled)} %; failures {stats['failures']}"
+        )
         if stats["warnings"]:
-            lines.append(f"  {'':<26} warnings: " + ", ".join(f"{code} x {count}"
-                                                              for code, count in stats["warnings"].items()))
+            lines.append(
+                f"  {'':<26} warnings: " + ", ".join(f"{code} x {count}" for code, count in stats["warnings"].items())
+            )
     for name, gain in summary["improvement"].items():
         if gain["mean"] is None:
             lines.append(f"  {name} vs {summary['improvement_over']}: no paired runs")
         elif gain["ci_low"] is None:
             lines.append(f"  {name} vs {summary['improvement_over']}: {significant(gain['mean'])} % (one paired run)")
         else:
-            lines.append(f"  {name} vs {summary['improvement_over']}: improvement "
-                         f"{with_interval(gain['mean'], gain['ci_low'], gain['ci_high'])} % (paired, {gain['paired_runs']} seeds)")
+            lines.append(
+                f"  {name} vs {summary['improvement_over']}: improvement "
+                f"{with_interval(gain['mean'], gain['ci_low'], gain['ci_high'])} % "
+                f"(paired, {gain['paired_runs']} seeds)"
+            )
     return "\n".join(lines)

@@ -1,4 +1,5 @@
 """Metrics over finished runs (model.md §4.4; paper eq. 35). Plain NumPy."""
+
 from __future__ import annotations
 
 import math
@@ -92,9 +93,16 @@ def improvement(baseline: float, candidate: float) -> float:
 
 
 # The range each statistic can take; its confidence interval stays inside it (see :func:`mean_ci`).
-METRIC_DOMAINS = {"e_tr_mean": "nonnegative", "e_tr_rms": "nonnegative", "e_tr_max": "nonnegative",
-                  "e_tr_final": "nonnegative", "settling_time": "nonnegative", "effort": "nonnegative",
-                  "saturation_fraction": "fraction", "improvement": "at_most_100"}
+METRIC_DOMAINS = {
+    "e_tr_mean": "nonnegative",
+    "e_tr_rms": "nonnegative",
+    "e_tr_max": "nonnegative",
+    "e_tr_final": "nonnegative",
+    "settling_time": "nonnegative",
+    "effort": "nonnegative",
+    "saturation_fraction": "fraction",
+    "improvement": "at_most_100",
+}
 DOMAINS = ("real", "nonnegative", "fraction", "at_most_100")
 
 
@@ -122,8 +130,16 @@ def _interval(mean: float, se: float, quantile: float, domain: str) -> tuple[flo
 
 
 def _check_domain(values: np.ndarray, domain: str) -> None:
-    bounds = {"real": (-np.inf, np.inf), "nonnegative": (0.0, np.inf), "fraction": (0.0, 1.0),
-              "at_most_100": (-np.inf, 100.0)}[domain] if domain in DOMAINS else None
+    bounds = (
+        {
+            "real": (-np.inf, np.inf),
+            "nonnegative": (0.0, np.inf),
+            "fraction": (0.0, 1.0),
+            "at_most_100": (-np.inf, 100.0),
+        }[domain]
+        if domain in DOMAINS
+        else None
+    )
     if bounds is None:
         raise ValueError(f"unknown domain '{domain}'; one of {', '.join(DOMAINS)}")
     if values.size and (values.min() < bounds[0] or values.max() > bounds[1]):
@@ -172,8 +188,13 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
 
     present = np.asarray([v for v in values if v is not None], dtype=float)
     _check_domain(present, domain)
-    summary = {"mean": None, "ci_low": None, "ci_high": None, "n": int(present.size),
-               "missing": len(values) - int(present.size)}
+    summary = {
+        "mean": None,
+        "ci_low": None,
+        "ci_high": None,
+        "n": int(present.size),
+        "missing": len(values) - int(present.size),
+    }
     if present.size:
         summary["mean"] = float(np.mean(present))
     if present.size >= 2:
@@ -184,9 +205,17 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
     return summary
 
 
-def summarize(columns: Mapping[str, np.ndarray], *, status: str, window: tuple[float, float], control_period: float,
-              settling_threshold: float, failure_time: float | None = None, warnings: Sequence[dict] = (),
-              floor_friction: float = 0.8) -> dict:
+def summarize(
+    columns: Mapping[str, np.ndarray],
+    *,
+    status: str,
+    window: tuple[float, float],
+    control_period: float,
+    settling_threshold: float,
+    failure_time: float | None = None,
+    warnings: Sequence[dict] = (),
+    floor_friction: float = 0.8,
+) -> dict:
     """The ``metrics.json`` dictionary of a run (docs/guide.md).
 
     Error statistics are over ``window``; settling time, effort and saturation fraction over the

@@ -8,6 +8,7 @@ output only with ``--overwrite``; a folder ddtrack did not write (no marker ``dd
 ``identification.json`` or ``figures/gains.png`` beside a new run) and a failure midway leaves the old output as
 it was. ``sweep`` and ``bench`` resume in place instead, and only the same study.
 """
+
 from __future__ import annotations
 
 import json
@@ -54,8 +55,10 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, OSError):
-            raise RunError(f"cannot write '{path}' ({exc.strerror or exc}); "
-                           "nothing partial was left: free some space or choose another --out") from exc
+            raise RunError(
+                f"cannot write '{path}' ({exc.strerror or exc}); "
+                "nothing partial was left: free some space or choose another --out"
+            ) from exc
         raise
 
 
@@ -71,13 +74,20 @@ def check_writable(folder: Path) -> None:
         with tempfile.TemporaryFile(dir=existing):
             pass
     except OSError as exc:
-        raise RunError(f"output folder '{folder}' cannot be written ({exc.strerror or exc}); "
-                       "choose another with --out") from None
+        raise RunError(
+            f"output folder '{folder}' cannot be written ({exc.strerror or exc}); choose another with --out"
+        ) from None
 
 
 #: a file each command's output has always held: folders written before the marker existed are still known
-SIGNATURES = {"run": "metrics.json", "mc": "summary.json", "tune": "tune.json", "reproduce": "table1.json",
-              "sweep": "records", "bench": "leaderboard.json"}
+SIGNATURES = {
+    "run": "metrics.json",
+    "mc": "summary.json",
+    "tune": "tune.json",
+    "reproduce": "table1.json",
+    "sweep": "records",
+    "bench": "leaderboard.json",
+}
 
 
 def read_marker(folder: Path) -> dict | None:
@@ -112,23 +122,33 @@ def check_output(folder: Path, *, command: str, overwrite: bool, study: str | No
         return False
     marker = read_marker(folder)
     if marker is None:
-        raise RunError(f"--out '{folder}' holds files ddtrack did not write (no {MARKER}); ddtrack replaces only "
-                       "its own output folders: choose another --out, or empty it yourself")
+        raise RunError(
+            f"--out '{folder}' holds files ddtrack did not write (no {MARKER}); ddtrack replaces only "
+            "its own output folders: choose another --out, or empty it yourself"
+        )
     if marker["command"] == command and study is None:
         return False  # replaced whole by staged_folder
     if marker["command"] == command and marker.get("study") == study and not overwrite:
         return True
     if not overwrite:
-        what = (f"another `ddtrack {command}` study ({marker.get('study') or 'unknown'})"
-                if marker["command"] == command else f"the output of `ddtrack {marker['command']}`")
-        raise RunError(f"--out '{folder}' already holds {what}: add --overwrite to replace it whole, "
-                       "or choose another --out")
+        what = (
+            f"another `ddtrack {command}` study ({marker.get('study') or 'unknown'})"
+            if marker["command"] == command
+            else f"the output of `ddtrack {marker['command']}`"
+        )
+        raise RunError(
+            f"--out '{folder}' already holds {what}: add --overwrite to replace it whole, or choose another --out"
+        )
     return False
 
 
 def _marker_bytes(command: str, study: str | None) -> bytes:
-    marker = {"command": command, "study": study, "version": version("ddtrack"),
-              "written": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    marker = {
+        "command": command,
+        "study": study,
+        "version": version("ddtrack"),
+        "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
     return (json.dumps(marker, indent=2) + "\n").encode()
 
 
@@ -192,5 +212,14 @@ def start_resumable(folder: Path, *, command: str, study: str, resume: bool) -> 
     write_marker(folder, command=command, study=study)
 
 
-__all__ = ["MARKER", "SIGNATURES", "atomic_write", "check_output", "check_writable", "read_marker", "staged_folder",
-           "start_resumable", "write_marker"]
+__all__ = [
+    "MARKER",
+    "SIGNATURES",
+    "atomic_write",
+    "check_output",
+    "check_writable",
+    "read_marker",
+    "staged_folder",
+    "start_resumable",
+    "write_marker",
+]

@@ -2,6 +2,7 @@
 
 Every function takes ``ax``/``axes=None``, returns the figure and never calls ``show()``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -9,10 +10,10 @@ from collections.abc import Mapping, Sequence
 import matplotlib
 
 matplotlib.use("Agg")  # headless by default; a user's explicit backend choice before import still wins
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
 Columns = Mapping[str, np.ndarray]
 ROBOT, REFERENCE, ADAPTIVE = "#1f77b4", "#444444", "#d62728"
@@ -27,8 +28,13 @@ PANEL_GAP = 0.25  #: between stacked panels [in]
 def _fixed_margins(fig: Figure, gap: float = PANEL_GAP) -> None:
     width, height = fig.get_size_inches()
     left, right, bottom, top = MARGINS
-    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
-                        hspace=gap / ((height - top - bottom) / max(1, len(fig.axes)) - gap))
+    fig.subplots_adjust(
+        left=left / width,
+        right=1 - right / width,
+        bottom=bottom / height,
+        top=1 - top / height,
+        hspace=gap / ((height - top - bottom) / max(1, len(fig.axes)) - gap),
+    )
 
 
 def _axes(ax: Axes | None, **figure) -> tuple[Figure, Axes]:
@@ -51,12 +57,18 @@ def _stack(axes: Sequence[Axes] | None, n: int, title: str = "") -> tuple[Figure
 
 def _legend_above(ax: Axes, columns: int = 4) -> None:
     """The legend in one row above the axes, where it hides no data (nor the path's start marker)."""
-    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=columns, fontsize=8, frameon=False,
-              borderaxespad=0.0)
+    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=columns, fontsize=8, frameon=False, borderaxespad=0.0)
 
 
-def plot_path(columns: Columns, ax: Axes | None = None, *, title: str = "", label: str = "robot",
-              color: str = ROBOT, reference: bool = True) -> Figure:
+def plot_path(
+    columns: Columns,
+    ax: Axes | None = None,
+    *,
+    title: str = "",
+    label: str = "robot",
+    color: str = ROBOT,
+    reference: bool = True,
+) -> Figure:
     """The robot's path against the reference in the plane (the paper's Figs. 10 and 14).
 
     Call again with ``ax`` and ``reference=False`` to overlay another run.
@@ -81,8 +93,15 @@ def plot_path(columns: Columns, ax: Axes | None = None, *, title: str = "", labe
 STATES = (("x", "m"), ("y", "m"), ("theta", "rad"), ("v", "m/s"), ("omega", "rad/s"))
 
 
-def plot_states(columns: Columns, axes: Sequence[Axes] | None = None, *, label: str = "robot", color: str = ROBOT,
-                reference: bool = True, title: str = "") -> Figure:
+def plot_states(
+    columns: Columns,
+    axes: Sequence[Axes] | None = None,
+    *,
+    label: str = "robot",
+    color: str = ROBOT,
+    reference: bool = True,
+    title: str = "",
+) -> Figure:
     """x, y, theta (continuous), v and omega against time, with their references (the paper's Figs. 11 and 15,
     and the velocities the dynamic layer tracks); the states a column set lacks are left out."""
     shown = [(name, unit) for name, unit in STATES if name in columns]
@@ -98,9 +117,15 @@ def plot_states(columns: Columns, axes: Sequence[Axes] | None = None, *, label: 
     return fig
 
 
-def plot_errors(columns: Columns, axes: Sequence[Axes] | None = None, *,
-                window: tuple[float, float] | None = None, label: str = "robot", color: str = ROBOT,
-                title: str = "") -> Figure:
+def plot_errors(
+    columns: Columns,
+    axes: Sequence[Axes] | None = None,
+    *,
+    window: tuple[float, float] | None = None,
+    label: str = "robot",
+    color: str = ROBOT,
+    title: str = "",
+) -> Figure:
     """Posture errors e_x, e_y, e_theta and e_tr against time (the paper's Figs. 12 and 16);
     the metric window is shaded, with a legend entry."""
     fig, axes = _stack(axes, 4, title)
@@ -109,8 +134,7 @@ def plot_errors(columns: Columns, axes: Sequence[Axes] | None = None, *,
         ax.set_ylabel(f"{name} [{unit}]")
         ax.grid(alpha=0.3)
         if window is not None:
-            ax.axvspan(*window, color="#2ca02c", alpha=0.08,
-                       label=f"metric window [{window[0]:g}, {window[1]:g}] s")
+            ax.axvspan(*window, color="#2ca02c", alpha=0.08, label=f"metric window [{window[0]:g}, {window[1]:g}] s")
     if np.all(columns["e_tr"] > 0):  # the transient and the steady state differ by orders of magnitude
         axes[-1].set_yscale("log")
     _legend_above(axes[0])
@@ -118,8 +142,9 @@ def plot_errors(columns: Columns, axes: Sequence[Axes] | None = None, *,
     return fig
 
 
-def plot_torques(columns: Columns, axes: Sequence[Axes] | None = None, *, max_torque: float | None = None,
-                 title: str = "") -> Figure:
+def plot_torques(
+    columns: Columns, axes: Sequence[Axes] | None = None, *, max_torque: float | None = None, title: str = ""
+) -> Figure:
     """Wheel torques tau_R and tau_L against time. The actuator limit is drawn (with a legend entry) when the
     torques come within half of it; otherwise the axis fits the torques and the legend says the limit is off scale."""
     fig, axes = _stack(axes, 2, title)
@@ -129,8 +154,13 @@ def plot_torques(columns: Columns, axes: Sequence[Axes] | None = None, *, max_to
         if max_torque is not None and np.isfinite(max_torque):
             if peak >= 0.5 * max_torque:
                 for sign in (-1.0, 1.0):
-                    ax.axhline(sign * max_torque, color="#d62728", lw=0.8, ls=":",
-                               label=f"limit ±{max_torque:.3g} N m" if sign > 0 else None)
+                    ax.axhline(
+                        sign * max_torque,
+                        color="#d62728",
+                        lw=0.8,
+                        ls=":",
+                        label=f"limit ±{max_torque:.3g} N m" if sign > 0 else None,
+                    )
             else:  # a limit far above the torques would flatten them to a line
                 ax.plot([], [], color="#d62728", lw=0.8, ls=":", label=f"limit ±{max_torque:.3g} N m (off scale)")
         ax.set_ylabel(f"{name} [N m]")
@@ -140,8 +170,14 @@ def plot_torques(columns: Columns, axes: Sequence[Axes] | None = None, *, max_to
     return fig
 
 
-def plot_gains(columns: Columns, axes: Sequence[Axes] | None = None, *, label: str = "gains",
-               color: str = ADAPTIVE, title: str = "") -> Figure:
+def plot_gains(
+    columns: Columns,
+    axes: Sequence[Axes] | None = None,
+    *,
+    label: str = "gains",
+    color: str = ADAPTIVE,
+    title: str = "",
+) -> Figure:
     """The gains Kx, Ky, Ktheta against time (the paper's Figs. 13 and 17)."""
     fig, axes = _stack(axes, 3, title)
     for ax, name in zip(axes, ("kx", "ky", "ktheta"), strict=True):

@@ -6,6 +6,7 @@ controllers the same plant, disturbance and noise; only the NN controller's own 
 initialisation, identification dither) differ between seeds. The statistic is model.md §4.4's mean of
 e_tr over the case's metric window; the improvement is paired per seed.
 """
+
 from __future__ import annotations
 
 import csv
@@ -20,8 +21,8 @@ import matplotlib.pyplot as plt
 
 from ._format import with_interval
 from .metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
-from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
 from .outdir import atomic_write
+from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
 from .runner import prepare, run_setup
 from .scenario import Scenario, load_scenario
 from .shipped import scenario_path
@@ -58,8 +59,9 @@ class CaseResult:
     series: dict[str, dict] = field(default_factory=dict)
 
 
-def run_case(name: str, seeds: int, variants: dict[str, list[str]],
-             progress: Callable[[str], None] = lambda _: None) -> CaseResult:
+def run_case(
+    name: str, seeds: int, variants: dict[str, list[str]], progress: Callable[[str], None] = lambda _: None
+) -> CaseResult:
     """Run every variant of one case for seeds 0..seeds-1."""
     path = scenario_path(name)
     scenarios = {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
@@ -72,8 +74,14 @@ def run_case(name: str, seeds: int, variants: dict[str, list[str]],
             sim = scenario.simulation
             run = run_setup(scenario, setup, draws)
             columns = timeseries(run)
-            metrics = summarize(columns, status=run.status_name, window=sim.window, control_period=sim.control_period,
-                                settling_threshold=sim.settling_threshold, failure_time=run.failure_time)
+            metrics = summarize(
+                columns,
+                status=run.status_name,
+                window=sim.window,
+                control_period=sim.control_period,
+                settling_threshold=sim.settling_threshold,
+                failure_time=run.failure_time,
+            )
             result.metrics.setdefault(variant, []).append(metrics)
             if seed == 0:
                 result.series[variant] = columns
@@ -89,16 +97,23 @@ def _with_values(values: list, key: str) -> dict:
 def summarise_case(name: str, case: CaseResult) -> dict:
     """The Table 1 entry of one case: statistics per variant, paired improvements over backstepping."""
     baseline = case.metrics["backstepping"]
-    entry: dict = {"title": CASES[name], "window": list(case.scenario.simulation.window),
-                   "paper": PAPER_TABLE[name], "controllers": {}, "improvement": {}}
+    entry: dict = {
+        "title": CASES[name],
+        "window": list(case.scenario.simulation.window),
+        "paper": PAPER_TABLE[name],
+        "controllers": {},
+        "improvement": {},
+    }
     for variant, runs in case.metrics.items():
         entry["controllers"][variant] = {key: _with_values([r[key] for r in runs], key) for key in STATISTICS}
         entry["controllers"][variant]["status"] = [r["status"] for r in runs]
         if runs[0].get("final_gains") is not None and variant != "backstepping":
             entry["controllers"][variant]["final_gains"] = [r["final_gains"] for r in runs]
         if variant != "backstepping":
-            paired = [improvement(b["e_tr_mean"], r["e_tr_mean"]) if r["e_tr_mean"] is not None else None
-                      for b, r in zip(baseline, runs, strict=True)]
+            paired = [
+                improvement(b["e_tr_mean"], r["e_tr_mean"]) if r["e_tr_mean"] is not None else None
+                for b, r in zip(baseline, runs, strict=True)
+            ]
             entry["improvement"][variant] = _with_values(paired, "improvement")
     return entry
 
@@ -112,9 +127,12 @@ def _fmt(stat: dict) -> str:
 def table_markdown(table: dict) -> str:
     """Table 1 as Markdown: ours (mean [95 % CI] over seeds) beside the paper's."""
     lines = [f"# Table 1, reproduced ({table['seeds']} seeds; mean [95 % CI])", ""]
-    lines += ["| case | controller | mean e_tr [m] | paper [m] | RMS e_tr [m] | max e_tr [m] | settling [s] "
-              "| improvement [%] | paper [%] |", "|---|---|---|---|---|---|---|---|---|"]
-    for name, entry in table["cases"].items():
+    lines += [
+        "| case | controller | mean e_tr [m] | paper [m] | RMS e_tr [m] | max e_tr [m] | settling [s] "
+        "| improvement [%] | paper [%] |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for _name, entry in table["cases"].items():
         for variant, stats in entry["controllers"].items():
             paper = entry["paper"].get(variant)
             gain = entry["improvement"].get(variant)
@@ -122,10 +140,15 @@ def table_markdown(table: dict) -> str:
                 f"| {entry['title']} | {variant} | {_fmt(stats['e_tr_mean'])} | {paper if paper else ''} | "
                 f"{_fmt(stats['e_tr_rms'])} | {_fmt(stats['e_tr_max'])} | {_fmt(stats['settling_time'])} | "
                 f"{_fmt(gain) if gain else ''} | "
-                f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |")
-    lines += ["", "Statistic: mean of e_tr over each case's metric window (model.md §4.4): "
-              + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())
-              + ". Improvement: 100 (E_BS - E_NN) / E_BS, paired by seed.", ""]
+                f"{entry['paper']['improvement'] if variant == 'nn_adaptive' else ''} |"
+            )
+    lines += [
+        "",
+        "Statistic: mean of e_tr over each case's metric window (model.md §4.4): "
+        + ", ".join(f"{e['title']} {e['window']} s" for e in table["cases"].values())
+        + ". Improvement: 100 (E_BS - E_NN) / E_BS, paired by seed.",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -139,12 +162,23 @@ def table_csv(table: dict) -> str:
             for key in STATISTICS:
                 s = stats[key]
                 paper = entry["paper"].get(variant) if key == "e_tr_mean" else None
-                writer.writerow([name, variant, key, s["mean"], s["ci_low"], s["ci_high"], s["n"],
-                                 "" if paper is None else paper])
+                writer.writerow(
+                    [name, variant, key, s["mean"], s["ci_low"], s["ci_high"], s["n"], "" if paper is None else paper]
+                )
             if variant in entry["improvement"]:
                 s = entry["improvement"][variant]
-                writer.writerow([name, variant, "improvement_percent", s["mean"], s.get("ci_low"), s.get("ci_high"),
-                                 table["seeds"], entry["paper"]["improvement"] if variant == "nn_adaptive" else ""])
+                writer.writerow(
+                    [
+                        name,
+                        variant,
+                        "improvement_percent",
+                        s["mean"],
+                        s.get("ci_low"),
+                        s.get("ci_high"),
+                        table["seeds"],
+                        entry["paper"]["improvement"] if variant == "nn_adaptive" else "",
+                    ]
+                )
     return out.getvalue()
 
 
@@ -164,18 +198,26 @@ def case_figures(name: str, case: CaseResult) -> dict[str, plt.Figure]:
     gains = plot_gains(nn, label="NN-adaptive")
     plot_gains(bs, axes=gains.axes, label="backstepping", color="#1f77b4")
     gains.axes[0].legend(loc="best", fontsize=8)
-    return {f"{name}_path.png": path, f"{name}_states.png": states, f"{name}_errors.png": errors,
-            f"{name}_gains.png": gains}
+    return {
+        f"{name}_path.png": path,
+        f"{name}_states.png": states,
+        f"{name}_errors.png": errors,
+        f"{name}_gains.png": gains,
+    }
 
 
-def reproduce(out: Path, *, seeds: int = 5, ablations: bool = False,
-              progress: Callable[[str], None] = lambda _: None) -> dict:
+def reproduce(
+    out: Path, *, seeds: int = 5, ablations: bool = False, progress: Callable[[str], None] = lambda _: None
+) -> dict:
     """Run both cases, write ``table1.{md,csv,json}`` and ``figures/`` into ``out``; return the table."""
     start = time.perf_counter()
     variants = VARIANTS | (ABLATIONS if ablations else {})
     cases = {name: run_case(name, seeds, variants, progress) for name in CASES}
-    table = {"seeds": seeds, "ablations": ablations,
-             "cases": {name: summarise_case(name, case) for name, case in cases.items()}}
+    table = {
+        "seeds": seeds,
+        "ablations": ablations,
+        "cases": {name: summarise_case(name, case) for name, case in cases.items()},
+    }
     for name, case in cases.items():
         for file, fig in case_figures(name, case).items():
             atomic_write(out / "figures" / file, lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))

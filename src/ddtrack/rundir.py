@@ -3,6 +3,7 @@
 Every file is written under a temporary name in the same folder and renamed into place, so the
 folder never holds a half-written file.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,13 +23,21 @@ from .scenario import Scenario, to_toml_dict
 
 
 def float64_array(values) -> pa.Array:
-    """A float64 Arrow array over the values' buffer (``pa.array`` would import pandas, 0.25 s, to look for a Series)."""
+    """A float64 Arrow array over the values' buffer.
+
+    ``pa.array`` would import pandas (0.25 s) only to check whether the values are a Series.
+    """
     values = np.ascontiguousarray(values, dtype=np.float64)
     return pa.Array.from_buffers(pa.float64(), len(values), [None, pa.py_buffer(values)])
 
 
-def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray], metrics: dict,
-              identification: dict | None = None) -> list[Path]:
+def write_run(
+    folder: Path,
+    scenario: Scenario,
+    columns: Mapping[str, np.ndarray],
+    metrics: dict,
+    identification: dict | None = None,
+) -> list[Path]:
     """Write a run folder; return the paths written. ``identification`` (the NN emulator's pre-training:
     loss per epoch, prediction NMSE) goes to ``identification.json``."""
     folder = Path(folder)
@@ -43,8 +52,10 @@ def write_run(folder: Path, scenario: Scenario, columns: Mapping[str, np.ndarray
     put("timeseries.parquet", lambda f: pq.write_table(table, f))
     put("metrics.json", lambda f: f.write((json.dumps(metrics, indent=2, allow_nan=False) + "\n").encode()))
     if identification is not None:
-        put("identification.json",
-            lambda f: f.write((json.dumps(identification, indent=2, allow_nan=False) + "\n").encode()))
+        put(
+            "identification.json",
+            lambda f: f.write((json.dumps(identification, indent=2, allow_nan=False) + "\n").encode()),
+        )
     window = tuple(metrics["window"])
     title = f"{scenario.name}: {scenario.controller.kind} on {scenario.trajectory.kind}"
     figures = {

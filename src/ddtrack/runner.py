@@ -4,6 +4,7 @@ One seed is split, in a fixed order, into streams for the plant-parameter draw, 
 the measurement noise and the controller. So swapping the controller leaves the plant and its
 disturbances unchanged (common random numbers).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -17,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ._format import significant
 from . import feasibility
+from ._format import significant
 from .adaptation import adaptation_warnings
 from .identification import Identification, identify
 from .metrics import summarize, tracking_error
@@ -33,7 +34,10 @@ def enable_compilation_cache() -> None:
     """Turn on JAX's persistent compilation cache in ``$DDTRACK_CACHE_DIR`` or ``~/.cache/ddtrack/jax``:
     a second process (a CLI run, a sweep worker) then skips most of the compile. Every compiled function
     is kept: the run's small random-number jits would otherwise be compiled again each time (0.4 s)."""
-    root = os.environ.get("DDTRACK_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
+    root = (
+        os.environ.get("DDTRACK_CACHE_DIR")
+        or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
+    )
     try:
         cache = Path(root) / "jax"
         cache.mkdir(parents=True, exist_ok=True)
@@ -75,7 +79,12 @@ def _seed_draws(seed: int, n_steps: int) -> tuple[dict, tuple, Array, Array]:
     its own, and together they cost an interactive run more than the simulation (same bits either way)."""
     keys = streams(seed)
     disturbance = jax.random.normal(keys["disturbance"], (n_steps, 2))
-    return keys, tuple(jax.random.split(keys["controller"], 3)), disturbance, jax.random.normal(keys["noise"], (n_steps, 5))
+    return (
+        keys,
+        tuple(jax.random.split(keys["controller"], 3)),
+        disturbance,
+        jax.random.normal(keys["noise"], (n_steps, 5)),
+    )
 
 
 def controller_keys(seed: int) -> tuple[jax.Array, jax.Array, jax.Array]:
@@ -89,8 +98,9 @@ def needs_identification(scenario: Scenario) -> bool:
     return isinstance(scenario.controller, NNAdaptiveConfig) and scenario.controller.identification
 
 
-def prepare(scenario: Scenario, *, seed: int | None = None, identification: Identification | None = None,
-            identify: bool = True) -> tuple[Setup, Draws]:
+def prepare(
+    scenario: Scenario, *, seed: int | None = None, identification: Identification | None = None, identify: bool = True
+) -> tuple[Setup, Draws]:
     """Build the run's objects and draw all of its randomness from ``seed`` (default the scenario's).
 
     ``identification`` reuses an emulator identified for the same plant and seed (ablations that only
@@ -124,8 +134,9 @@ def prepare(scenario: Scenario, *, seed: int | None = None, identification: Iden
     return setup, Draws(disturbance=disturbance, noise=noise, controller_key=k_run)
 
 
-def with_identification(scenario: Scenario, setup: Setup, key: jax.Array,
-                        result: Identification | None = None) -> Setup:
+def with_identification(
+    scenario: Scenario, setup: Setup, key: jax.Array, result: Identification | None = None
+) -> Setup:
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
     (model.md §3.7), with the scenario's disturbance and noise, and hand it the trained network."""
     outer = setup.controller.outer
@@ -141,12 +152,25 @@ def _identifier(scenario: Scenario):
     config, sim = scenario.controller, scenario.simulation
 
     def run_identification(plant, inner, emulator, key, disturbance, noise):
-        return identify(plant, inner, emulator, key, duration=config.identification_duration, epochs=config.epochs,
-                        control_period=sim.control_period, substeps=sim.substeps, dither=config.identification_dither(),
-                        gains=config.gains, limits=(config.max_velocity, config.max_yaw_rate),
-                        learning_rate=config.learning_rate, momentum=config.momentum,
-                        clip_norm=config.gradient_clip, disturbance=disturbance, noise=noise,
-                        reference_scale=config.identification_scale())
+        return identify(
+            plant,
+            inner,
+            emulator,
+            key,
+            duration=config.identification_duration,
+            epochs=config.epochs,
+            control_period=sim.control_period,
+            substeps=sim.substeps,
+            dither=config.identification_dither(),
+            gains=config.gains,
+            limits=(config.max_velocity, config.max_yaw_rate),
+            learning_rate=config.learning_rate,
+            momentum=config.momentum,
+            clip_norm=config.gradient_clip,
+            disturbance=disturbance,
+            noise=noise,
+            reference_scale=config.identification_scale(),
+        )
 
     return run_identification
 
@@ -174,8 +198,18 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
         identify_all = vmap_runs(_identifier(scenario))
-        found = identify_all(*shard_runs((setup.plant_params, setup.controller.inner, setup.controller.outer.emulator,
-                                          keys, setup.disturbance, setup.noise)))
+        found = identify_all(
+            *shard_runs(
+                (
+                    setup.plant_params,
+                    setup.controller.inner,
+                    setup.controller.outer.emulator,
+                    keys,
+                    setup.disturbance,
+                    setup.noise,
+                )
+            )
+        )
         setup = with_identification(scenario, setup, keys, found)
     return setup, draws
 
@@ -231,8 +265,12 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
 
 def _steps(scenario: Scenario) -> dict:
     sim = scenario.simulation
-    return {"n_steps": sim.n_steps, "control_period": sim.control_period, "substeps": sim.substeps,
-            "divergence_error": scenario.divergence_distance()}
+    return {
+        "n_steps": sim.n_steps,
+        "control_period": sim.control_period,
+        "substeps": sim.substeps,
+        "divergence_error": scenario.divergence_distance(),
+    }
 
 
 METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
@@ -244,12 +282,20 @@ def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray
     velocity-input plant, whose speeds jump by command and whose contact forces mean nothing."""
     if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
         return {}
-    geometry = {"mass": float(params.mass), "inertia_axle": float(params.inertia_axle),
-                "com_offset": float(params.com_offset), "half_axle": float(params.half_axle)}
-    right, left = traction.wheel_speeds(columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius),
-                                        half_axle=float(params.half_axle))
-    return {"mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
-            "wheel_speed_r": right, "wheel_speed_l": left}
+    geometry = {
+        "mass": float(params.mass),
+        "inertia_axle": float(params.inertia_axle),
+        "com_offset": float(params.com_offset),
+        "half_axle": float(params.half_axle),
+    }
+    right, left = traction.wheel_speeds(
+        columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius), half_axle=float(params.half_axle)
+    )
+    return {
+        "mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
+        "wheel_speed_r": right,
+        "wheel_speed_l": left,
+    }
 
 
 def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
@@ -257,15 +303,30 @@ def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
     needed, floor = metrics.get("mu_required_max"), scenario.plant.floor_friction
     if needed is None or needed <= floor:
         return []
-    above = f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
+    above = (
+        f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
+    )
     if needed > traction.MAX_FLOOR_FRICTION:
-        return [{"code": "friction_beyond_any_floor", "message": (
-            f"the run needed a friction coefficient of {significant(needed)} ({above}); robot wheels get at most about "
-            f"{traction.MAX_FLOOR_FRICTION:g} from real floors, so a real robot would slip: this result is not "
-            "physically possible; lower robot.max_torque, the gains, or the initial error")}]
-    return [{"code": "friction_exceeds_floor", "message": (
-        f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels would "
-        "slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's")}]
+        return [
+            {
+                "code": "friction_beyond_any_floor",
+                "message": (
+                    f"the run needed a friction coefficient of {significant(needed)} ({above}); robot wheels get at "
+                    "most about "
+                    f"{traction.MAX_FLOOR_FRICTION:g} from real floors, so a real robot would slip: this result is not "
+                    "physically possible; lower robot.max_torque, the gains, or the initial error"
+                ),
+            }
+        ]
+    return [
+        {
+            "code": "friction_exceeds_floor",
+            "message": (
+                f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels "
+                "would slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's"
+            ),
+        }
+    ]
 
 
 def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) -> list[dict]:
@@ -273,17 +334,27 @@ def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) ->
     clamps (:func:`ddtrack.feasibility.check`), grip no floor could give (:func:`traction_warnings`), and the
     NN-adaptive controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`;
     ``nmse``, the emulator's identification NMSE per output, or None)."""
-    return [*feasibility.check(scenario), *traction_warnings(scenario, metrics),
-            *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse])]
+    return [
+        *feasibility.check(scenario),
+        *traction_warnings(scenario, metrics),
+        *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse]),
+    ]
 
 
-def run_metrics(scenario: Scenario, columns: dict, *, status: str, failure_time: float | None = None,
-                nmse=None) -> dict:
+def run_metrics(
+    scenario: Scenario, columns: dict, *, status: str, failure_time: float | None = None, nmse=None
+) -> dict:
     """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings."""
     sim = scenario.simulation
-    metrics = summarize(columns, status=status, window=sim.window, control_period=sim.control_period,
-                        settling_threshold=sim.settling_threshold, failure_time=failure_time,
-                        floor_friction=scenario.plant.floor_friction)
+    metrics = summarize(
+        columns,
+        status=status,
+        window=sim.window,
+        control_period=sim.control_period,
+        settling_threshold=sim.settling_threshold,
+        failure_time=failure_time,
+        floor_friction=scenario.plant.floor_friction,
+    )
     metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse) if status == "ok" else []
     return metrics
 
@@ -293,8 +364,11 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
-    series = {"e_xy": result.error[..., :2],  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
-              "v": result.state[..., 3], "omega": result.state[..., 4]}  # for the grip the run needed
+    series = {
+        "e_xy": result.error[..., :2],  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
+        "v": result.state[..., 3],
+        "omega": result.state[..., 4],
+    }  # for the grip the run needed
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
     return series, result.status, result.failure_index
 
@@ -302,8 +376,9 @@ def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise,
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
     sim = scenario.simulation
-    runs = shard_runs((setup.plant, setup.controller, setup.trajectory, setup.x0, draws,
-                       setup.disturbance, setup.noise))
+    runs = shard_runs(
+        (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+    )
     series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **_steps(scenario)))
     e_xy = series.pop("e_xy")
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
@@ -316,16 +391,28 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
         columns = {name: value[valid] for name, value in columns.items()}
-        columns |= traction_columns(jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params),
-                                    columns)
-        metrics.append(run_metrics(scenario, columns,
-                                   status=STATUS_NAMES[int(status[i])], failure_time=None if k < 0 else float(t[k]),
-                                   nmse=None if nmse is None else nmse[i]))
+        columns |= traction_columns(
+            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns
+        )
+        metrics.append(
+            run_metrics(
+                scenario,
+                columns,
+                status=STATUS_NAMES[int(status[i])],
+                failure_time=None if k < 0 else float(t[k]),
+                nmse=None if nmse is None else nmse[i],
+            )
+        )
     return metrics
 
 
-def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 64,
-                on_chunk: Callable[[int], None] = lambda done: None) -> list[dict]:
+def monte_carlo(
+    scenario: Scenario,
+    seeds: Sequence[int],
+    *,
+    chunk_size: int = 64,
+    on_chunk: Callable[[int], None] = lambda done: None,
+) -> list[dict]:
     """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
     the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
 
@@ -351,7 +438,7 @@ def monte_carlo(scenario: Scenario, seeds: Sequence[int], *, chunk_size: int = 6
     drawn = [field for field, draw in scenario.randomize if draw is not None]
     rows: list[dict] = []
     for start in range(0, len(seeds), chunk_size):
-        chunk = list(seeds[start:start + chunk_size])
+        chunk = list(seeds[start : start + chunk_size])
         padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
         setup, draws = prepare_batch(scenario, padded)
         for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):

@@ -4,6 +4,7 @@ Every user mistake becomes a :class:`~ddtrack.errors.ConfigError` naming the fie
 and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left out takes the
 ``[robot]`` value.
 """
+
 from __future__ import annotations
 
 import csv
@@ -34,9 +35,9 @@ from .controllers import (
     one_step_coefficient,
 )
 from .controllers.baselines import (
+    MPPI,
     AdaptiveComputedTorque,
     LTVUnicycleLQR,
-    MPPI,
     MPPICost,
     RegulatedPurePursuit,
     SlidingModeTorque,
@@ -82,29 +83,42 @@ class SimulationConfig(_Section):
     duration: Positive = Field(40.0, description="Length of the run [s].")
     control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
     substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
-    metric_window: Pair | None = Field(None, description="[start, end] of the error statistics [s]; "
-                                                         "default the whole run.")
+    metric_window: Pair | None = Field(
+        None, description="[start, end] of the error statistics [s]; default the whole run."
+    )
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Seed of every random draw of the run.")
     settling_threshold: Positive = Field(0.1, description="e_tr below which the run counts as settled [m].")
-    divergence_error: Positive | None = Field(None, description=(
-        "Tracking error at which a run is declared diverged [m]; default 3 (initial error + the reference's extent "
-        "+ 2 L), which scales with the scenario (91.5 m for the paper's line, 3.8 m for a Burger's 0.5 m circle)."))
+    divergence_error: Positive | None = Field(
+        None,
+        description=(
+            "Tracking error at which a run is declared diverged [m]; default 3 (initial error + the reference's extent "
+            "+ 2 L), which scales with the scenario (91.5 m for the paper's line, 3.8 m for a Burger's 0.5 m circle)."
+        ),
+    )
 
     @model_validator(mode="after")
     def _consistent(self) -> SimulationConfig:
         steps = self.duration / self.control_period
         if steps > MAX_CONTROL_PERIODS:
-            raise FieldError("duration", f"{self.duration:g} s at {self.control_period:g} s per period is "
-                             f"{steps:.3g} control periods, over the limit of {MAX_CONTROL_PERIODS:,}; "
-                             "shorten duration or lengthen control_period")
+            raise FieldError(
+                "duration",
+                f"{self.duration:g} s at {self.control_period:g} s per period is "
+                f"{steps:.3g} control periods, over the limit of {MAX_CONTROL_PERIODS:,}; "
+                "shorten duration or lengthen control_period",
+            )
         if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
-            raise FieldError("duration", f"{self.duration:g} s is not a whole number of control periods "
-                             f"({self.control_period:g} s); choose a duration that is a multiple of it")
+            raise FieldError(
+                "duration",
+                f"{self.duration:g} s is not a whole number of control periods "
+                f"({self.control_period:g} s); choose a duration that is a multiple of it",
+            )
         if self.metric_window is not None:
             start, end = self.metric_window
             if not 0.0 <= start < end <= self.duration + 1e-9:
-                raise FieldError("metric_window", f"{list(self.metric_window)} must satisfy 0 <= start < end <= "
-                                 f"duration ({self.duration:g} s)")
+                raise FieldError(
+                    "metric_window",
+                    f"{list(self.metric_window)} must satisfy 0 <= start < end <= duration ({self.duration:g} s)",
+                )
         return self
 
     @property
@@ -124,8 +138,9 @@ class RobotConfig(_Section):
 
     mass: Positive = Field(10.0, description="Total mass m [kg].")
     inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
-    com_offset: float = Field(0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass "
-                                                                 "ahead of the axle [m].")
+    com_offset: float = Field(
+        0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass ahead of the axle [m]."
+    )
     wheel_radius: Positive = Field(0.05, le=2.0, description="Wheel radius R [m].")
     half_axle: Positive = Field(0.25, le=5.0, description="Half the wheel separation L [m].")
     max_torque: Positive = Field(10.0, description="Torque limit per wheel [N m].")
@@ -143,33 +158,42 @@ class PlantConfig(_Section):
     mass: Positive | None = Field(None, description="True total mass m [kg].")
     inertia: Positive | None = Field(None, description="True yaw inertia about the centre of mass I_C [kg m^2].")
     com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = Field(
-        None, description="True signed offset d of the centre of mass ahead of the axle [m].")
+        None, description="True signed offset d of the centre of mass ahead of the axle [m]."
+    )
     wheel_radius: Annotated[float, Field(gt=0.0, le=2.0)] | None = Field(None, description="True wheel radius R [m].")
     half_axle: Annotated[float, Field(gt=0.0, le=5.0)] | None = Field(
-        None, description="True half wheel separation L [m].")
+        None, description="True half wheel separation L [m]."
+    )
     max_torque: Positive | None = Field(None, description="True torque limit per wheel [N m].")
     viscous_friction: NonNegative | None = Field(None, description="True viscous wheel friction b_w [N m s/rad].")
     coulomb_friction: NonNegative | None = Field(None, description="True Coulomb wheel friction tau_c [N m].")
     friction_smoothing: Positive | None = Field(None, description="tanh smoothing wheel speed eps_f [rad/s].")
-    floor_friction: Positive = Field(0.8, le=3.0, description=(
-        "Friction coefficient of the floor (tyre on floor, 0.3 to 1.0 indoors): a run that needs more grip is "
-        "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor)."))
+    floor_friction: Positive = Field(
+        0.8,
+        le=3.0,
+        description=(
+            "Friction coefficient of the floor (tyre on floor, 0.3 to 1.0 indoors): a run that needs more grip is "
+            "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor)."
+        ),
+    )
 
 
 class ParameterDraw(_Section):
     """A random plant parameter, drawn per run: value * (1 + r) (``relative``) or value + r (``absolute``),
     r uniform on [-spread, spread] or normal with std = spread truncated at 3 std."""
 
-    distribution: Literal["uniform", "normal"] = Field("uniform", description=(
-        "r uniform on [-spread, spread], or normal with std = spread truncated at 3 std."))
+    distribution: Literal["uniform", "normal"] = Field(
+        "uniform", description=("r uniform on [-spread, spread], or normal with std = spread truncated at 3 std.")
+    )
     relative: NonNegative | None = Field(None, description="Spread as a fraction of the value: value * (1 + r).")
     absolute: NonNegative | None = Field(None, description="Spread in the parameter's unit: value + r.")
 
     @model_validator(mode="after")
     def _one_spread(self) -> ParameterDraw:
         if (self.relative is None) == (self.absolute is None):
-            raise FieldError("relative", "give exactly one of 'relative' (fraction of the value) or 'absolute' "
-                             "(same unit)")
+            raise FieldError(
+                "relative", "give exactly one of 'relative' (fraction of the value) or 'absolute' (same unit)"
+            )
         return self
 
     @property
@@ -187,10 +211,12 @@ class RandomizeConfig(_Section):
     com_offset: ParameterDraw | None = Field(None, description="Draw of the plant's centre-of-mass offset d [m].")
     wheel_radius: ParameterDraw | None = Field(None, description="Draw of the plant's wheel radius R [m].")
     half_axle: ParameterDraw | None = Field(None, description="Draw of the plant's half axle L [m].")
-    viscous_friction: ParameterDraw | None = Field(None, description=(
-        "Draw of the plant's viscous wheel friction b_w [N m s/rad]."))
-    coulomb_friction: ParameterDraw | None = Field(None, description=(
-        "Draw of the plant's Coulomb wheel friction tau_c [N m]."))
+    viscous_friction: ParameterDraw | None = Field(
+        None, description=("Draw of the plant's viscous wheel friction b_w [N m s/rad].")
+    )
+    coulomb_friction: ParameterDraw | None = Field(
+        None, description=("Draw of the plant's Coulomb wheel friction tau_c [N m].")
+    )
 
 
 # --- [disturbance], [noise] ----------------------------------------------------------------------
@@ -240,7 +266,7 @@ class GaussianDisturbance(_Section):
 
 
 DisturbanceConfig = Annotated[
-    Union[NoDisturbance, ConstantDisturbance, SinusoidDisturbance, GaussianDisturbance], Field(discriminator="kind")
+    NoDisturbance | ConstantDisturbance | SinusoidDisturbance | GaussianDisturbance, Field(discriminator="kind")
 ]
 
 
@@ -284,8 +310,10 @@ class SquareTrajectory(_Section):
     @model_validator(mode="after")
     def _fits(self) -> SquareTrajectory:
         if 2.0 * self.corner_radius > self.side:
-            raise FieldError("corner_radius", f"{self.corner_radius:g} m does not fit on a side of {self.side:g} m; "
-                             "use at most side / 2")
+            raise FieldError(
+                "corner_radius",
+                f"{self.corner_radius:g} m does not fit on a side of {self.side:g} m; use at most side / 2",
+            )
         try:
             self.build()
         except ValueError as exc:  # a side too small for distinct corners (5e-324 m)
@@ -307,8 +335,13 @@ class CircleTrajectory(_Section):
     clockwise: bool = Field(False, description="Direction of travel.")
 
     def build(self) -> Trajectory:
-        return Circle(center=self.center, radius=self.radius, speed=self.speed, start_angle=self.start_angle,
-                      clockwise=self.clockwise)
+        return Circle(
+            center=self.center,
+            radius=self.radius,
+            speed=self.speed,
+            start_angle=self.start_angle,
+            clockwise=self.clockwise,
+        )
 
 
 class FigureEightTrajectory(_Section):
@@ -334,8 +367,13 @@ class SinusoidTrajectory(_Section):
     wavelength: Length = Field(10.0, description="Wavelength along the axis [m].")
 
     def build(self) -> Trajectory:
-        return Sinusoid(start=self.start, heading=self.heading, speed=self.speed, amplitude=self.amplitude,
-                        wavelength=self.wavelength)
+        return Sinusoid(
+            start=self.start,
+            heading=self.heading,
+            speed=self.speed,
+            amplitude=self.amplitude,
+            wavelength=self.wavelength,
+        )
 
 
 class WaypointsTrajectory(_Section):
@@ -385,8 +423,12 @@ class WaypointsTrajectory(_Section):
 
 
 TrajectoryConfig = Annotated[
-    Union[LineTrajectory, SquareTrajectory, CircleTrajectory, FigureEightTrajectory, SinusoidTrajectory,
-          WaypointsTrajectory],
+    LineTrajectory
+    | SquareTrajectory
+    | CircleTrajectory
+    | FigureEightTrajectory
+    | SinusoidTrajectory
+    | WaypointsTrajectory,
     Field(discriminator="kind"),
 ]
 
@@ -395,12 +437,16 @@ def _contained(base: Path, name: str) -> Path:
     """``base / name``, refused (ValueError) unless it stays inside ``base``'s folder tree once ``..`` and symlinks
     are resolved: a scenario, perhaps from someone else, can make ddtrack read only files beside it or below it."""
     if Path(name).is_absolute():
-        raise ValueError(f"'{name}' is an absolute path; a waypoints file is read relative to the scenario file, "
-                         "inside its folder: copy the CSV beside the scenario and give its file name")
+        raise ValueError(
+            f"'{name}' is an absolute path; a waypoints file is read relative to the scenario file, "
+            "inside its folder: copy the CSV beside the scenario and give its file name"
+        )
     path = base / name
     if not path.resolve().is_relative_to(base.resolve()):
-        raise ValueError(f"'{name}' leads outside the scenario's folder ('..' or a symlink); copy the CSV beside "
-                         "the scenario and give its file name")
+        raise ValueError(
+            f"'{name}' leads outside the scenario's folder ('..' or a symlink); copy the CSV beside "
+            "the scenario and give its file name"
+        )
     return path
 
 
@@ -427,8 +473,9 @@ def read_waypoints(path: Path) -> list[Pair]:
             if not points and not header_seen:
                 header_seen = True
                 continue  # a header line
-            raise ValueError(f"waypoints file '{path}' line {number}: expected two numbers 'x,y', "
-                             f"got {','.join(row)[:40]!r}") from None
+            raise ValueError(
+                f"waypoints file '{path}' line {number}: expected two numbers 'x,y', got {','.join(row)[:40]!r}"
+            ) from None
     return points
 
 
@@ -438,14 +485,18 @@ def read_waypoints(path: Path) -> list[Pair]:
 class InitialConfig(_Section):
     """The robot's state at t = 0."""
 
-    pose: tuple[Coordinate, Coordinate, float] | None = Field(None, description="[x, y, theta] of the axle midpoint; "
-                                                                      "default the reference pose at t = 0.")
+    pose: tuple[Coordinate, Coordinate, float] | None = Field(
+        None, description="[x, y, theta] of the axle midpoint; default the reference pose at t = 0."
+    )
     velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
 
 
 class _InnerLoopConfig(_Section):
-    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md): computed torque
-    (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level controller meets the same dynamics layer."""
+    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md).
+
+    The inner loop is computed torque (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level
+    controller meets the same dynamics layer.
+    """
 
     kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
     inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
@@ -479,16 +530,21 @@ class BacksteppingConfig(_InnerLoopConfig):
     @model_validator(mode="after")
     def _strict_needs_computed_torque(self) -> BacksteppingConfig:
         if self.strict and self.inner != "computed_torque":
-            raise FieldError("strict", "strict = true needs inner = \"computed_torque\" (the cross term enters eq. 11)")
+            raise FieldError("strict", 'strict = true needs inner = "computed_torque" (the cross term enters eq. 11)')
         return self
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
-                             max_yaw_rate=self.max_yaw_rate, strict=self.strict)
+        outer = Backstepping(
+            kx=kx,
+            ky=ky,
+            ktheta=ktheta,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            strict=self.strict,
+        )
         return Cascade(outer, self.build_inner(nominal, control_period))
-
 
 
 PositiveTriple = tuple[Positive, Positive, Positive]
@@ -498,42 +554,62 @@ class NNAdaptiveConfig(BacksteppingConfig):
     """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (model.md §3)."""
 
     kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
-    rates: tuple[NonNegative, NonNegative, NonNegative] = Field((200.0, 200.0, 200.0), description=(
-        "Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."))
+    rates: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (200.0, 200.0, 200.0),
+        description=("Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."),
+    )
     gain_momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.0, description="beta_K, momentum of the gains.")
     max_step: PositiveTriple = Field((0.05, 5.0, 0.5), description="Largest gain change per control period.")
     gain_min: PositiveTriple = Field((0.1, 1.0, 0.1), description="Lower gain bounds (Kx, Ky, Ktheta).")
     gain_max: PositiveTriple = Field((10.0, 600.0, 60.0), description="Upper gain bounds (Kx, Ky, Ktheta).")
     gate_error: Positive = Field(0.5, description="Gains adapt only while e_tr is below this [m].")
     leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
-    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field((1.0, 50.0, 1.0), description=(
-        "Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta)."))
+    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (1.0, 50.0, 1.0), description=("Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta).")
+    )
     jacobian: Literal["network", "analytic", "quasi_static", "model", "model_sensitivity"] = Field(
-        "network", description=("Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
-                                "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."))
-    error_jacobian: Literal["exact", "paper"] = Field("exact", description=(
-        "d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e."))
-    emulator: Literal["E1", "E0"] = Field("E1", description=(
-        "E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c)."))
+        "network",
+        description=(
+            "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
+            "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."
+        ),
+    )
+    error_jacobian: Literal["exact", "paper"] = Field(
+        "exact", description=("d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e.")
+    )
+    emulator: Literal["E1", "E0"] = Field(
+        "E1", description=("E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c).")
+    )
     hidden_units: int = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
     learning_rate: Positive = Field(0.2, description="Emulator backpropagation rate eta.")
     momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.3, description="Emulator momentum beta.")
     gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
     online_learning: bool = Field(True, description="Train the emulator on every new sample.")
-    learn_saturated: bool = Field(False, description=(
-        "Also train the emulator online on transitions during which a clamp or the torque limit acted."))
+    learn_saturated: bool = Field(
+        False,
+        description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
+    )
     structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
     identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
     identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
     epochs: int = Field(100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data.")
-    identification_speed: tuple[Positive, Positive] | None = Field(None, description=(
-        "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
-        "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."))
-    dither: tuple[NonNegative, NonNegative] | None = Field(None, description=(
-        "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
-        "(0.05, 0.1) scaled like the identification reference."))
-    freeze_time: NonNegative | None = Field(None, description=(
-        "No gain change before this time [s]; default 0 with identification, 2 without."))
+    identification_speed: tuple[Positive, Positive] | None = Field(
+        None,
+        description=(
+            "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
+            "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."
+        ),
+    )
+    dither: tuple[NonNegative, NonNegative] | None = Field(
+        None,
+        description=(
+            "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
+            "(0.05, 0.1) scaled like the identification reference."
+        ),
+    )
+    freeze_time: NonNegative | None = Field(
+        None, description=("No gain change before this time [s]; default 0 with identification, 2 without.")
+    )
 
     @model_validator(mode="after")
     def _gains_inside_bounds(self) -> NNAdaptiveConfig:
@@ -543,9 +619,12 @@ class NNAdaptiveConfig(BacksteppingConfig):
         if self.identification_speed is not None:  # identification data taken against a clamp teaches nothing
             (v, w), (v_max, w_max) = self.identification_speed, (self.max_velocity, self.max_yaw_rate)
             if v > v_max or w > w_max:
-                raise FieldError("identification_speed", f"[{v:g}, {w:g}] exceeds the clamps max_velocity = "
-                                 f"{v_max:g} m/s, max_yaw_rate = {w_max:g} rad/s; keep each below about 80 % "
-                                 "of its clamp")
+                raise FieldError(
+                    "identification_speed",
+                    f"[{v:g}, {w:g}] exceeds the clamps max_velocity = "
+                    f"{v_max:g} m/s, max_yaw_rate = {w_max:g} rad/s; keep each below about 80 % "
+                    "of its clamp",
+                )
         return self
 
     def identification_scale(self) -> tuple[float, float]:
@@ -561,26 +640,51 @@ class NNAdaptiveConfig(BacksteppingConfig):
         """One period of the nominal model under the inner loop, RK4 steps of at most 1 ms (the "model" Jacobians)."""
         if not self.jacobian.startswith("model"):
             return None
-        return NominalPeriod(DynamicPlant(nominal), self.build_inner(nominal, control_period), control_period,
-                             substeps=max(1, math.ceil(control_period / 1e-3 - 1e-9)))
+        return NominalPeriod(
+            DynamicPlant(nominal),
+            self.build_inner(nominal, control_period),
+            control_period,
+            substeps=max(1, math.ceil(control_period / 1e-3 - 1e-9)),
+        )
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller with a freshly initialised emulator (its identification is done by the runner)."""
         uses_velocity = self.emulator == "E1"
         k_v, k_w = self.identification_scale()  # the emulator's range is the identification's
-        emulator = Emulator(init_mlp(key, 4 if uses_velocity else 2, self.hidden_units, 3),
-                            emulator_scales(control_period, uses_velocity=uses_velocity, max_velocity=k_v * 1.0,
-                                            max_yaw_rate=k_w * 2.0), uses_velocity)
+        emulator = Emulator(
+            init_mlp(key, 4 if uses_velocity else 2, self.hidden_units, 3),
+            emulator_scales(
+                control_period, uses_velocity=uses_velocity, max_velocity=k_v * 1.0, max_yaw_rate=k_w * 2.0
+            ),
+            uses_velocity,
+        )
         bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
         freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
         outer = NNAdaptiveBackstepping(
-            gains=self.gains, emulator=emulator, control_period=control_period,
-            analytic_coefficients=one_step_coefficient(bandwidth, control_period), rates=self.rates,
-            gain_momentum=self.gain_momentum, max_step=self.max_step, gain_min=self.gain_min, gain_max=self.gain_max,
-            gate_error=self.gate_error, leakage=self.leakage, gamma=self.gamma, learning_rate=self.learning_rate,
-            momentum=self.momentum, clip_norm=self.gradient_clip, freeze_time=freeze, max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate, jacobian=self.jacobian, error_jacobian=self.error_jacobian,
-            online_learning=self.online_learning, learn_saturated=self.learn_saturated, structured_jacobian=self.structured_jacobian, strict=self.strict,
+            gains=self.gains,
+            emulator=emulator,
+            control_period=control_period,
+            analytic_coefficients=one_step_coefficient(bandwidth, control_period),
+            rates=self.rates,
+            gain_momentum=self.gain_momentum,
+            max_step=self.max_step,
+            gain_min=self.gain_min,
+            gain_max=self.gain_max,
+            gate_error=self.gate_error,
+            leakage=self.leakage,
+            gamma=self.gamma,
+            learning_rate=self.learning_rate,
+            momentum=self.momentum,
+            clip_norm=self.gradient_clip,
+            freeze_time=freeze,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            jacobian=self.jacobian,
+            error_jacobian=self.error_jacobian,
+            online_learning=self.online_learning,
+            learn_saturated=self.learn_saturated,
+            structured_jacobian=self.structured_jacobian,
+            strict=self.strict,
             nominal_period=self._nominal_period(nominal, control_period),
         )
         return Cascade(outer, self.build_inner(nominal, control_period))
@@ -590,30 +694,47 @@ class LTVLQRConfig(_InnerLoopConfig):
     """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
 
     kind: Literal["ltv_lqr"]
-    q_tolerance: PositiveTriple = Field((0.0625, 0.125, 2.0), description=(
-        "Tolerated (e_x [m], e_y [m], e_theta [rad]); Q = diag(1/q^2) (Bryson's rule, WPILib's defaults)."))
-    r_tolerance: tuple[Positive, Positive] = Field((1.0, 2.0), description=(
-        "Tolerated velocity correction (v [m/s], omega [rad/s]); R = diag(1/r^2)."))
-    min_velocity: Positive = Field(1e-4, description=(
-        "|v_r| below this is linearised at this speed, where e_y stays controllable [m/s]."))
-    dare_iterations: int = Field(32, ge=1, le=64, description=(
-        "Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."))
+    q_tolerance: PositiveTriple = Field(
+        (0.0625, 0.125, 2.0),
+        description=(
+            "Tolerated (e_x [m], e_y [m], e_theta [rad]); Q = diag(1/q^2) (Bryson's rule, WPILib's defaults)."
+        ),
+    )
+    r_tolerance: tuple[Positive, Positive] = Field(
+        (1.0, 2.0), description=("Tolerated velocity correction (v [m/s], omega [rad/s]); R = diag(1/r^2).")
+    )
+    min_velocity: Positive = Field(
+        1e-4, description=("|v_r| below this is linearised at this speed, where e_y stays controllable [m/s].")
+    )
+    dare_iterations: int = Field(
+        32,
+        ge=1,
+        le=64,
+        description=("Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."),
+    )
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
     @model_validator(mode="after")
     def _min_velocity_below_clamp(self) -> LTVLQRConfig:
         if self.min_velocity >= self.max_velocity:
-            raise FieldError("min_velocity", f"{self.min_velocity:g} m/s must be below max_velocity "
-                             f"({self.max_velocity:g} m/s); WPILib uses 1e-4")
+            raise FieldError(
+                "min_velocity",
+                f"{self.min_velocity:g} m/s must be below max_velocity ({self.max_velocity:g} m/s); WPILib uses 1e-4",
+            )
         return self
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
-        outer = LTVUnicycleLQR(q_tolerance=self.q_tolerance, r_tolerance=self.r_tolerance,
-                               control_period=control_period, min_velocity=self.min_velocity,
-                               max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
-                               dare_iterations=self.dare_iterations)
+        outer = LTVUnicycleLQR(
+            q_tolerance=self.q_tolerance,
+            r_tolerance=self.r_tolerance,
+            control_period=control_period,
+            min_velocity=self.min_velocity,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            dare_iterations=self.dare_iterations,
+        )
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
@@ -624,21 +745,34 @@ class SlidingModeConfig(_Section):
     kind: Literal["sliding_mode_backstepping"]
     gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11, the linear part [1/s].")
-    switching_gain: tuple[NonNegative, NonNegative] = Field((1.0, 2.0), description=(
-        "K_s (v [m/s^2], omega [rad/s^2]): must exceed the matched disturbance as an acceleration; 0 gives "
-        "computed torque."))
-    boundary_layer: tuple[Positive, Positive] = Field((0.02, 0.04), description=(
-        "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."))
+    switching_gain: tuple[NonNegative, NonNegative] = Field(
+        (1.0, 2.0),
+        description=(
+            "K_s (v [m/s^2], omega [rad/s^2]): must exceed the matched disturbance as an acceleration; 0 gives "
+            "computed torque."
+        ),
+    )
+    boundary_layer: tuple[Positive, Positive] = Field(
+        (0.02, 0.04),
+        description=(
+            "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."
+        ),
+    )
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
-                             max_yaw_rate=self.max_yaw_rate)
-        return Cascade(outer, SlidingModeTorque(nominal, kc=self.kc, switching_gain=self.switching_gain,
-                                                boundary_layer=self.boundary_layer))
+        outer = Backstepping(
+            kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate
+        )
+        return Cascade(
+            outer,
+            SlidingModeTorque(
+                nominal, kc=self.kc, switching_gain=self.switching_gain, boundary_layer=self.boundary_layer
+            ),
+        )
 
 
 class KinematicBacksteppingConfig(_Section):
@@ -652,33 +786,46 @@ class KinematicBacksteppingConfig(_Section):
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Backstepping:
         """The velocity law alone, which drives the kinematic plant (:attr:`Setup.plant`); ``key`` is unused."""
         kx, ky, ktheta = self.gains
-        return Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
-                            max_yaw_rate=self.max_yaw_rate)
+        return Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate)
 
 
 class RegulatedPurePursuitConfig(_InnerLoopConfig):
     """Regulated pure pursuit (Macenski et al. 2023, Nav2) keeping pace with the reference, over an inner loop."""
 
     kind: Literal["regulated_pure_pursuit"]
-    lookahead_time: NonNegative = Field(1.5, description=(
-        "Lookahead L = |v| * lookahead_time, clipped to [min_lookahead, max_lookahead] [s]."))
+    lookahead_time: NonNegative = Field(
+        1.5, description=("Lookahead L = |v| * lookahead_time, clipped to [min_lookahead, max_lookahead] [s].")
+    )
     min_lookahead: Positive = Field(0.3, description="Smallest lookahead distance [m].")
     max_lookahead: Positive = Field(0.9, description="Largest lookahead distance [m]; equal to min_lookahead: fixed.")
-    pace_gain: NonNegative = Field(1.0, description=(
-        "k_s: desired speed v_r + k_s e_x, so the along-track error e_x decays at this rate [1/s]."))
-    min_radius: NonNegative = Field(0.9, description=(
-        "Arcs tighter than this radius slow the robot by radius / min_radius; 0 turns the regulation off [m]."))
-    min_regulated_speed: NonNegative = Field(0.25, description=(
-        "The curvature regulation never slows below this (nor above the desired speed) [m/s]."))
-    approach_distance: Positive = Field(0.6, description=(
-        "Slow down in proportion to the distance to where the reference comes to rest, within this [m]."))
+    pace_gain: NonNegative = Field(
+        1.0, description=("k_s: desired speed v_r + k_s e_x, so the along-track error e_x decays at this rate [1/s].")
+    )
+    min_radius: NonNegative = Field(
+        0.9,
+        description=(
+            "Arcs tighter than this radius slow the robot by radius / min_radius; 0 turns the regulation off [m]."
+        ),
+    )
+    min_regulated_speed: NonNegative = Field(
+        0.25, description=("The curvature regulation never slows below this (nor above the desired speed) [m/s].")
+    )
+    approach_distance: Positive = Field(
+        0.6,
+        description=("Slow down in proportion to the distance to where the reference comes to rest, within this [m]."),
+    )
     min_approach_speed: NonNegative = Field(0.05, description="Floor of the approach slow-down [m/s].")
     rotate_to_heading: bool = Field(True, description="Rotate in place while the carrot is far off the heading.")
-    rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(0.785, description=(
-        "Bearing of the carrot beyond which the robot rotates in place [rad]."))
+    rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(
+        0.785, description=("Bearing of the carrot beyond which the robot rotates in place [rad].")
+    )
     rotate_yaw_rate: Positive = Field(1.8, description="Yaw rate of the rotation in place [rad/s].")
-    search_horizon: Positive = Field(5.0, description=(
-        "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."))
+    search_horizon: Positive = Field(
+        5.0,
+        description=(
+            "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."
+        ),
+    )
     search_samples: int = Field(50, ge=2, le=1000, description="Segments of that search (linear between samples).")
     max_velocity: Positive = Field(2.0, description="Clamp on v_c [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c|, by slowing down on the same arc [rad/s].")
@@ -686,22 +833,35 @@ class RegulatedPurePursuitConfig(_InnerLoopConfig):
     @model_validator(mode="after")
     def _consistent(self) -> RegulatedPurePursuitConfig:
         if self.min_lookahead > self.max_lookahead:
-            raise FieldError("min_lookahead", f"{self.min_lookahead:g} m exceeds max_lookahead ({self.max_lookahead:g} m)")
+            raise FieldError(
+                "min_lookahead", f"{self.min_lookahead:g} m exceeds max_lookahead ({self.max_lookahead:g} m)"
+            )
         if self.rotate_yaw_rate > self.max_yaw_rate:
-            raise FieldError("rotate_yaw_rate", f"{self.rotate_yaw_rate:g} rad/s exceeds max_yaw_rate "
-                             f"({self.max_yaw_rate:g} rad/s)")
+            raise FieldError(
+                "rotate_yaw_rate", f"{self.rotate_yaw_rate:g} rad/s exceeds max_yaw_rate ({self.max_yaw_rate:g} rad/s)"
+            )
         return self
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> Cascade:
         """The controller searching ``trajectory`` for its carrot; ``key`` is unused (nothing is drawn)."""
         outer = RegulatedPurePursuit(
-            trajectory=trajectory, lookahead_time=self.lookahead_time, min_lookahead=self.min_lookahead,
-            max_lookahead=self.max_lookahead, pace_gain=self.pace_gain, min_radius=self.min_radius,
-            min_regulated_speed=self.min_regulated_speed, approach_distance=self.approach_distance,
-            min_approach_speed=self.min_approach_speed, rotate_min_angle=self.rotate_min_angle,
-            rotate_yaw_rate=self.rotate_yaw_rate, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate,
-            search_horizon=self.search_horizon, search_samples=self.search_samples,
-            rotate_to_heading=self.rotate_to_heading)
+            trajectory=trajectory,
+            lookahead_time=self.lookahead_time,
+            min_lookahead=self.min_lookahead,
+            max_lookahead=self.max_lookahead,
+            pace_gain=self.pace_gain,
+            min_radius=self.min_radius,
+            min_regulated_speed=self.min_regulated_speed,
+            approach_distance=self.approach_distance,
+            min_approach_speed=self.min_approach_speed,
+            rotate_min_angle=self.rotate_min_angle,
+            rotate_yaw_rate=self.rotate_yaw_rate,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            search_horizon=self.search_horizon,
+            search_samples=self.search_samples,
+            rotate_to_heading=self.rotate_to_heading,
+        )
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
@@ -711,15 +871,26 @@ class AdaptiveBacksteppingConfig(_Section):
 
     kind: Literal["adaptive_backstepping"]
     gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
-    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description=(
-        "K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."))
-    adaptation_gain: tuple[NonNegative, NonNegative, NonNegative] = Field((500.0, 5.0, 1e-4), description=(
-        "Gamma of the estimates of (m [kg s^2/m^2], I_C [kg m^2 s^2], viscous friction b_w [kg m^2]); "
-        "0 freezes that estimate at the [robot] value."))
-    estimate_range: tuple[Positive, Positive] = Field((0.5, 2.0), description=(
-        "Projection bounds of the m and I_C estimates, as multiples of the [robot] values."))
-    max_friction: NonNegative = Field(0.05, description=(
-        "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."))
+    kc: tuple[Positive, Positive] = Field(
+        (10.0, 10.0),
+        description=("K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."),
+    )
+    adaptation_gain: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (500.0, 5.0, 1e-4),
+        description=(
+            "Gamma of the estimates of (m [kg s^2/m^2], I_C [kg m^2 s^2], viscous friction b_w [kg m^2]); "
+            "0 freezes that estimate at the [robot] value."
+        ),
+    )
+    estimate_range: tuple[Positive, Positive] = Field(
+        (0.5, 2.0), description=("Projection bounds of the m and I_C estimates, as multiples of the [robot] values.")
+    )
+    max_friction: NonNegative = Field(
+        0.05,
+        description=(
+            "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."
+        ),
+    )
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
     strict: bool = Field(False, description="Add the strict-backstepping cross term to the torque law.")
@@ -728,20 +899,33 @@ class AdaptiveBacksteppingConfig(_Section):
     def _range_holds_the_nominal(self) -> AdaptiveBacksteppingConfig:
         low, high = self.estimate_range
         if not low <= 1.0 <= high or low == high:
-            raise FieldError("estimate_range", f"{list(self.estimate_range)} must satisfy low <= 1 <= high, "
-                             "low < high (the estimates start at the [robot] values); e.g. [0.5, 2.0]")
+            raise FieldError(
+                "estimate_range",
+                f"{list(self.estimate_range)} must satisfy low <= 1 <= high, "
+                "low < high (the estimates start at the [robot] values); e.g. [0.5, 2.0]",
+            )
         return self
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity,
-                             max_yaw_rate=self.max_yaw_rate, strict=self.strict)
+        outer = Backstepping(
+            kx=kx,
+            ky=ky,
+            ktheta=ktheta,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            strict=self.strict,
+        )
         low, high = self.estimate_range
         inner = AdaptiveComputedTorque(
-            nominal, kc=self.kc, gamma=self.adaptation_gain, control_period=control_period,
+            nominal,
+            kc=self.kc,
+            gamma=self.adaptation_gain,
+            control_period=control_period,
             lower=(low * nominal.mass, low * nominal.inertia, 0.0),
-            upper=(high * nominal.mass, high * nominal.inertia, max(self.max_friction, nominal.viscous_friction)))
+            upper=(high * nominal.mass, high * nominal.inertia, max(self.max_friction, nominal.viscous_friction)),
+        )
         return Cascade(outer, inner)
 
 
@@ -751,39 +935,71 @@ class MPPIConfig(_Section):
     kind: Literal["mppi"]
     samples: int = Field(64, ge=1, le=10_000, description="K: torque sequences sampled per control period.")
     horizon: int = Field(20, ge=1, le=500, description="H: steps per sequence.")
-    model_step: Positive = Field(0.05, le=10.0, description=(
-        "dt: how long each step of a sequence holds its torque, and the rollout's Euler step [s]."))
-    temperature: Positive = Field(1.0, description=(
-        "lambda of the weights exp(-(S - min S) / lambda), in cost units: lower trusts the best samples more."))
-    noise_std: tuple[Positive, Positive] = Field((0.2, 0.2), description=(
-        "sigma of the sampled torque perturbations, [right, left] wheel [N m]."))
+    model_step: Positive = Field(
+        0.05,
+        le=10.0,
+        description=("dt: how long each step of a sequence holds its torque, and the rollout's Euler step [s]."),
+    )
+    temperature: Positive = Field(
+        1.0,
+        description=(
+            "lambda of the weights exp(-(S - min S) / lambda), in cost units: lower trusts the best samples more."
+        ),
+    )
+    noise_std: tuple[Positive, Positive] = Field(
+        (0.2, 0.2), description=("sigma of the sampled torque perturbations, [right, left] wheel [N m].")
+    )
     position_weight: NonNegative = Field(100.0, description="q_p of the squared position error, per step [1/m^2].")
     heading_weight: NonNegative = Field(1.0, description="q_th of the squared heading error, per step [1/rad^2].")
-    velocity_weight: NonNegative = Field(1.0, description=(
-        "q_nu of |nu - nu_r|^2, per step [s^2/m^2 and s^2/rad^2]."))
+    velocity_weight: NonNegative = Field(1.0, description=("q_nu of |nu - nu_r|^2, per step [s^2/m^2 and s^2/rad^2]."))
     effort_weight: NonNegative = Field(0.01, description="r of the squared wheel torques, per step [1/(N m)^2].")
-    terminal_weight: NonNegative = Field(10.0, description=(
-        "q_T: the last step's position and heading terms count again, times this."))
-    limit_weight: NonNegative = Field(1000.0, description=(
-        "q_lim of the squared excess of |v| over max_velocity and |omega| over max_yaw_rate, per step."))
+    terminal_weight: NonNegative = Field(
+        10.0, description=("q_T: the last step's position and heading terms count again, times this.")
+    )
+    limit_weight: NonNegative = Field(
+        1000.0,
+        description=("q_lim of the squared excess of |v| over max_velocity and |omega| over max_yaw_rate, per step."),
+    )
     max_velocity: Positive = Field(2.0, description="Soft limit on |v| of the rollouts [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Soft limit on |omega| of the rollouts [rad/s].")
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> MPPI:
         """The controller previewing ``trajectory``; it samples with the key the simulator hands to ``init``,
         so ``key`` is unused."""
-        cost = MPPICost(position=self.position_weight, heading=self.heading_weight, velocity=self.velocity_weight,
-                        effort=self.effort_weight, terminal=self.terminal_weight, limit=self.limit_weight,
-                        max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate)
-        return MPPI(nominal, trajectory, cost=cost, model_step=self.model_step, control_period=control_period,
-                    temperature=self.temperature, noise_std=self.noise_std, samples=self.samples,
-                    horizon=self.horizon)
+        cost = MPPICost(
+            position=self.position_weight,
+            heading=self.heading_weight,
+            velocity=self.velocity_weight,
+            effort=self.effort_weight,
+            terminal=self.terminal_weight,
+            limit=self.limit_weight,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+        )
+        return MPPI(
+            nominal,
+            trajectory,
+            cost=cost,
+            model_step=self.model_step,
+            control_period=control_period,
+            temperature=self.temperature,
+            noise_std=self.noise_std,
+            samples=self.samples,
+            horizon=self.horizon,
+        )
 
 
-ControllerConfig = Annotated[Union[BacksteppingConfig, NNAdaptiveConfig, LTVLQRConfig, SlidingModeConfig,
-                                   KinematicBacksteppingConfig, RegulatedPurePursuitConfig,
-                                   AdaptiveBacksteppingConfig, MPPIConfig],
-                             Field(discriminator="kind")]
+ControllerConfig = Annotated[
+    BacksteppingConfig
+    | NNAdaptiveConfig
+    | LTVLQRConfig
+    | SlidingModeConfig
+    | KinematicBacksteppingConfig
+    | RegulatedPurePursuitConfig
+    | AdaptiveBacksteppingConfig
+    | MPPIConfig,
+    Field(discriminator="kind"),
+]
 
 
 # --- the scenario --------------------------------------------------------------------------------
@@ -828,8 +1044,9 @@ class Scenario(_Section):
             low = value * (1 - draw.reach) if draw.relative is not None else value - draw.reach
             must_be_positive = field in ("mass", "inertia", "wheel_radius", "half_axle")
             if low <= 0.0 if must_be_positive else low < 0.0:
-                raise FieldError(f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); "
-                                 "use a smaller spread")
+                raise FieldError(
+                    f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); use a smaller spread"
+                )
         return self
 
     def divergence_distance(self) -> float:
@@ -869,8 +1086,9 @@ def summary(model: type[BaseModel]) -> str:
 # --- loading --------------------------------------------------------------------------------------
 
 
-def load_scenario(path: str | Path, *, overrides: Sequence[str] = (), seed: int | None = None,
-                  controller: str | None = None) -> Scenario:
+def load_scenario(
+    path: str | Path, *, overrides: Sequence[str] = (), seed: int | None = None, controller: str | None = None
+) -> Scenario:
     """Read, override and validate a scenario file.
 
     Parameters
@@ -997,8 +1215,11 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     dotted, sep, raw = override.partition("=")
     keys = [k.strip() for k in dotted.split(".")]
     if not sep or not all(keys):
-        raise ConfigError("--set", f"'{override}' is not of the form section.key=value",
-                          "e.g. --set robot.mass=12 or --set controller.gains=[1,55,15]")
+        raise ConfigError(
+            "--set",
+            f"'{override}' is not of the form section.key=value",
+            "e.g. --set robot.mass=12 or --set controller.gains=[1,55,15]",
+        )
     try:
         value = tomllib.loads(f"value = {raw}")["value"]
     except tomllib.TOMLDecodeError:
@@ -1025,9 +1246,11 @@ def _config_error(exc: ValidationError) -> ConfigError:
         return ConfigError(field, "unknown key", did_you_mean(path[-1], model.model_fields))
     if kind == "union_tag_invalid":
         choices = [c.strip(" '") for c in str(error["ctx"]["expected_tags"]).split(",")]
-        return ConfigError(field + ".kind", f"unknown kind {error['ctx']['tag']!r}", did_you_mean(error["ctx"]["tag"], choices))
+        return ConfigError(
+            field + ".kind", f"unknown kind {error['ctx']['tag']!r}", did_you_mean(error["ctx"]["tag"], choices)
+        )
     if kind == "union_tag_not_found":
-        return ConfigError(field + ".kind", "is missing", "add kind = \"...\"; `ddtrack list` shows the kinds")
+        return ConfigError(field + ".kind", "is missing", 'add kind = "..."; `ddtrack list` shows the kinds')
     if kind == "literal_error":
         choices = [c.strip(" '\"") for c in error["ctx"]["expected"].replace(" or ", ",").split(",")]
         return ConfigError(field, f"{error['input']!r} is not allowed", did_you_mean(str(error["input"]), choices))
@@ -1098,8 +1321,9 @@ class Setup:
         return KinematicPlant() if self.kinematic else DynamicPlant(self.plant_params)
 
 
-def build(scenario: Scenario, plant_params: RobotParams | None = None,
-          controller_key: jax.Array | None = None) -> Setup:
+def build(
+    scenario: Scenario, plant_params: RobotParams | None = None, controller_key: jax.Array | None = None
+) -> Setup:
     """Build the runtime objects; ``plant_params`` replaces the plant (e.g. a random draw) and
     ``controller_key`` seeds the controller's construction (e.g. the emulator's initial weights)."""
     nominal = scenario.robot.params()
@@ -1142,6 +1366,16 @@ def _drop_none(value: Any) -> Any:
 
 
 __all__ = [
-    "CONTROLLERS", "DISTURBANCES", "TRAJECTORIES", "Scenario", "Setup", "apply_override", "build",
-    "load_scenario", "read_waypoints", "summary", "to_toml_dict", "validate_scenario",
+    "CONTROLLERS",
+    "DISTURBANCES",
+    "TRAJECTORIES",
+    "Scenario",
+    "Setup",
+    "apply_override",
+    "build",
+    "load_scenario",
+    "read_waypoints",
+    "summary",
+    "to_toml_dict",
+    "validate_scenario",
 ]

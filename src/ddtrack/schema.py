@@ -4,6 +4,7 @@ Both are generated from the pydantic models that validate scenario files (:mod:`
 reference cannot drift from the validator: ``docs/reference.md`` is ``ddtrack schema --markdown`` and a test
 checks that it is current. Units are those of the fields' descriptions, in brackets (SI throughout).
 """
+
 from __future__ import annotations
 
 import json
@@ -14,9 +15,11 @@ from .scenario import Scenario
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 TITLE = "ddtrack scenario file"
 REGENERATE = "ddtrack schema --markdown > docs/reference.md"
-DESCRIPTION = ("A scenario for ddtrack (TOML): the run's timing, the nominal robot the controller believes in, the "
-               "true plant, its random draws, the disturbance and noise, the reference, the initial state and the "
-               "controller. Units are SI, given in brackets in the descriptions.")
+DESCRIPTION = (
+    "A scenario for ddtrack (TOML): the run's timing, the nominal robot the controller believes in, the "
+    "true plant, its random draws, the disturbance and noise, the reference, the initial state and the "
+    "controller. Units are SI, given in brackets in the descriptions."
+)
 
 
 def scenario_schema() -> dict[str, Any]:
@@ -117,8 +120,9 @@ def _table(schema: dict[str, Any], model: dict[str, Any], *, skip: tuple[str, ..
         described = node.get("description", "")
         if "$ref" in _optional(node) and not described:
             described = "An inline table, below."
-        lines.append(f"| `{key}` | {_type(schema, node)} | {_cell(default)} | {_cell(_bounds(node))} | "
-                     f"{_cell(described)} |")
+        lines.append(
+            f"| `{key}` | {_type(schema, node)} | {_cell(default)} | {_cell(_bounds(node))} | {_cell(described)} |"
+        )
     return lines
 
 
@@ -171,10 +175,15 @@ def schema_markdown(schema: dict[str, Any] | None = None) -> str:
             continue
         default = node.get("default", {}).get("kind")
         required = section in schema.get("required", [])
-        choice = ("required" if required else f'default `{_value(default)}`' if default else "")
-        out += [f"## [{section}]", "",
-                f"One of the kinds below, chosen by `kind` ({choice}): "
-                + ", ".join(f'`"{kind}"`' for kind in by_kind) + ".", ""]
+        choice = "required" if required else f"default `{_value(default)}`" if default else ""
+        out += [
+            f"## [{section}]",
+            "",
+            f"One of the kinds below, chosen by `kind` ({choice}): "
+            + ", ".join(f'`"{kind}"`' for kind in by_kind)
+            + ".",
+            "",
+        ]
         for kind, model in by_kind.items():
             out += [f'### [{section}] kind = "{kind}"', "", *_description(model)]
             if set(model["properties"]) == {"kind"}:
@@ -187,15 +196,20 @@ def schema_markdown(schema: dict[str, Any] | None = None) -> str:
 def _nested(schema: dict[str, Any], section: str, model: dict[str, Any]) -> list[str]:
     """Sub-tables of a section (each ``[randomize]`` entry is a ParameterDraw table), once per model."""
     out, seen = [], set()
-    for key, node in model["properties"].items():
+    for _key, node in model["properties"].items():
         inner = _optional(node)
         if "$ref" not in inner or inner["$ref"] in seen:
             continue
         seen.add(inner["$ref"])
         users = [k for k, n in model["properties"].items() if _optional(n).get("$ref") == inner["$ref"]]
         nested = resolve(schema, inner)
-        out += [f"### [{section}] entries ({', '.join(f'`{k}`' for k in users)})", "",
-                *_description(nested), *_table(schema, nested), ""]
+        out += [
+            f"### [{section}] entries ({', '.join(f'`{k}`' for k in users)})",
+            "",
+            *_description(nested),
+            *_table(schema, nested),
+            "",
+        ]
     return out
 
 

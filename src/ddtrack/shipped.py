@@ -1,4 +1,5 @@
 """The scenarios shipped with ddtrack, found both in a source checkout and in an installed wheel."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -6,6 +6,7 @@ hash, resumable). Seed s gives every controller the same plant draw, disturbance
 paired by (trajectory, level, seed). ``backstepping_tuned`` is backstepping with the gains ``ddtrack tune`` finds on
 the paper's two cases (the suite runs the tuning first and keeps its result in ``tuned.toml``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -20,15 +21,15 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.csv  # noqa: F401  (pa.csv)
+import pyarrow.csv
 import pyarrow.parquet as pq
 
-from .errors import ConfigError
 from ._format import significant, with_interval
+from .errors import ConfigError
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
-from .shipped import scenario_path
 from .outdir import atomic_write
 from .scenario import CONTROLLERS, load_scenario
+from .shipped import scenario_path
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 from .tune import problems, tune
 
@@ -40,11 +41,28 @@ _PAPER_DISTURBANCE = {"kind": "sinusoid", "bias": [0.03, 0.0], "amplitude": [0.0
 #: uncertainty level -> replacements of the scenario's [plant], [disturbance] and [noise] (the nominal [robot] stays)
 LEVELS: dict[str, dict[str, Any]] = {
     "exact": {"plant": {}, "disturbance": {"kind": "none"}, "noise": {}},
-    "paper": {"plant": {"mass": 12.0, "inertia": 0.70, "com_offset": 0.08, "viscous_friction": 0.005,
-                        "coulomb_friction": 0.05}, "disturbance": _PAPER_DISTURBANCE, "noise": {}},
-    "severe": {"plant": {"mass": 15.0, "inertia": 0.84, "com_offset": 0.08, "viscous_friction": 0.015,
-                         "coulomb_friction": 0.15}, "disturbance": _PAPER_DISTURBANCE,
-               "noise": {"position_std": 0.002, "heading_std": 0.002}},
+    "paper": {
+        "plant": {
+            "mass": 12.0,
+            "inertia": 0.70,
+            "com_offset": 0.08,
+            "viscous_friction": 0.005,
+            "coulomb_friction": 0.05,
+        },
+        "disturbance": _PAPER_DISTURBANCE,
+        "noise": {},
+    },
+    "severe": {
+        "plant": {
+            "mass": 15.0,
+            "inertia": 0.84,
+            "com_offset": 0.08,
+            "viscous_friction": 0.015,
+            "coulomb_friction": 0.15,
+        },
+        "disturbance": _PAPER_DISTURBANCE,
+        "noise": {"position_std": 0.002, "heading_std": 0.002},
+    },
 }
 
 
@@ -61,10 +79,20 @@ TRAJECTORIES: dict[str, tuple[str, list[str]]] = {
     "square": ("paper_square", []),
     "circle": ("circle", []),
     "figure_eight": ("figure_eight", []),
-    "sinusoid": ("paper_line", [*_OPEN_PATH, 'trajectory={kind="sinusoid", start=[0.0, 0.0], heading=0.0, '
-                                "speed=0.5, amplitude=1.0, wavelength=12.0}"]),
-    "spline": ("paper_line", [*_OPEN_PATH, f'trajectory={{kind="waypoints", points={toml_value(_spline_points())}, '
-                                           "speed=0.5, corner_radius=1.5}"]),
+    "sinusoid": (
+        "paper_line",
+        [
+            *_OPEN_PATH,
+            'trajectory={kind="sinusoid", start=[0.0, 0.0], heading=0.0, speed=0.5, amplitude=1.0, wavelength=12.0}',
+        ],
+    ),
+    "spline": (
+        "paper_line",
+        [
+            *_OPEN_PATH,
+            f'trajectory={{kind="waypoints", points={toml_value(_spline_points())}, speed=0.5, corner_radius=1.5}}',
+        ],
+    ),
 }
 
 
@@ -104,8 +132,14 @@ def _section_overrides(level: str) -> list[str]:
     return [f"{section}={toml_value(value)}" for section, value in LEVELS[level].items()]
 
 
-def _configuration(controller: str, base: str, overrides: list[str], tuned_gains: Sequence[float] | None,
-                   labels: dict, common: Sequence[str] = ()) -> Configuration:
+def _configuration(
+    controller: str,
+    base: str,
+    overrides: list[str],
+    tuned_gains: Sequence[float] | None,
+    labels: dict,
+    common: Sequence[str] = (),
+) -> Configuration:
     kind = BASELINE if controller == TUNED else controller
     extra = [f"controller.gains={toml_value(list(tuned_gains))}"] if controller == TUNED else []
     scenario = load_scenario(scenario_path(base), overrides=[*overrides, *extra, *common], controller=kind)
@@ -120,17 +154,30 @@ def plan_suite(suite: Suite, controllers: Sequence[str], tuned_gains: Sequence[f
             base, overrides = TRAJECTORIES[trajectory]
             for level in suite.levels:
                 labels = {"study": "leaderboard", "trajectory": trajectory, "level": level}
-                configurations.append(_configuration(controller, base, [*overrides, *_section_overrides(level)],
-                                                     tuned_gains, labels, suite.overrides))
+                configurations.append(
+                    _configuration(
+                        controller, base, [*overrides, *_section_overrides(level)], tuned_gains, labels, suite.overrides
+                    )
+                )
         for mass in suite.robustness_mass:
             for friction in suite.robustness_friction:
-                plant = {**LEVELS["paper"]["plant"], "mass": 10.0 * mass,
-                         "viscous_friction": 0.005 * friction, "coulomb_friction": 0.05 * friction}
+                plant = {
+                    **LEVELS["paper"]["plant"],
+                    "mass": 10.0 * mass,
+                    "viscous_friction": 0.005 * friction,
+                    "coulomb_friction": 0.05 * friction,
+                }
                 level = {**LEVELS["paper"], "plant": plant}
                 overrides = [f"{section}={toml_value(value)}" for section, value in level.items()]
-                labels = {"study": "robustness", "trajectory": "circle", "mass_factor": mass, "friction_factor": friction}
-                configurations.append(_configuration(controller, "circle", overrides, tuned_gains, labels,
-                                                     suite.overrides))
+                labels = {
+                    "study": "robustness",
+                    "trajectory": "circle",
+                    "mass_factor": mass,
+                    "friction_factor": friction,
+                }
+                configurations.append(
+                    _configuration(controller, "circle", overrides, tuned_gains, labels, suite.overrides)
+                )
     runs = {}
     for index, configuration in enumerate(configurations):
         for seed in range(suite.seeds):
@@ -151,8 +198,15 @@ def _rows(records: dict[str, dict], study: str) -> list[dict]:
     for record in records.values():
         labels = record["configuration"].get("labels", {})
         if labels.get("study") == study:
-            rows.append({"controller": record["configuration"]["controller"], "seed": record["seed"],
-                         "status": record["status"], **labels, **(record["metrics"] or {})})
+            rows.append(
+                {
+                    "controller": record["configuration"]["controller"],
+                    "seed": record["seed"],
+                    "status": record["status"],
+                    **labels,
+                    **(record["metrics"] or {}),
+                }
+            )
     return rows
 
 
@@ -164,14 +218,22 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
     board = []
     for name in controllers:
         mine = [r for r in rows if r["controller"] == name]
-        entry: dict[str, Any] = {"controller": name, "runs": len(mine),
-                                 "failures": sum(r["status"] != "ok" for r in mine)}
+        entry: dict[str, Any] = {
+            "controller": name,
+            "runs": len(mine),
+            "failures": sum(r["status"] != "ok" for r in mine),
+        }
         for key in STATISTICS:
-            entry[key] = mean_ci([r.get(key) if r["status"] == "ok" else None for r in mine], domain=METRIC_DOMAINS[key])
+            entry[key] = mean_ci(
+                [r.get(key) if r["status"] == "ok" else None for r in mine], domain=METRIC_DOMAINS[key]
+            )
         for reference in (BASELINE, TUNED):
             others = [by_cell.get((reference, r["trajectory"], r["level"], r["seed"]), {}) for r in mine]
-            entry[f"improvement_over_{reference}"] = None if reference == name else pooled_improvement(
-                [o.get("e_tr_mean") for o in others], [r.get("e_tr_mean") for r in mine])
+            entry[f"improvement_over_{reference}"] = (
+                None
+                if reference == name
+                else pooled_improvement([o.get("e_tr_mean") for o in others], [r.get("e_tr_mean") for r in mine])
+            )
         board.append(entry)
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
 
@@ -186,12 +248,17 @@ def board_markdown(board: list[dict], cells: dict) -> str:
     """The leaderboard as Markdown (``leaderboard.md``): mean [95 % CI] of each statistic per controller, paired
     improvements over backstepping and tuned backstepping, then mean e_tr [m] per trajectory and level
     (``cells``, from :func:`cell_means`)."""
-    lines = ["| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] | failures "
-             "| vs backstepping [%] | vs tuned backstepping [%] |", "|" + "---|" * 9]
+    lines = [
+        "| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] | failures "
+        "| vs backstepping [%] | vs tuned backstepping [%] |",
+        "|" + "---|" * 9,
+    ]
     for e in board:
-        lines.append(f"| {e['controller']} | {_ci(e['e_tr_mean'])} | {_ci(e['e_tr_rms'])} | {_ci(e['e_tr_max'])} | "
-                     f"{_ci(e['effort'])} | {_ci(e['saturation_fraction'], 100.0)} | {e['failures']}/{e['runs']} | "
-                     f"{_ci(e['improvement_over_' + BASELINE])} | {_ci(e['improvement_over_' + TUNED])} |")
+        lines.append(
+            f"| {e['controller']} | {_ci(e['e_tr_mean'])} | {_ci(e['e_tr_rms'])} | {_ci(e['e_tr_max'])} | "
+            f"{_ci(e['effort'])} | {_ci(e['saturation_fraction'], 100.0)} | {e['failures']}/{e['runs']} | "
+            f"{_ci(e['improvement_over_' + BASELINE])} | {_ci(e['improvement_over_' + TUNED])} |"
+        )
     lines += ["", "Mean e_tr [m] per trajectory and uncertainty level (mean over seeds; failed runs left out):", ""]
     columns = sorted({(t, lv) for (_, t, lv) in cells})
     lines.append("| controller | " + " | ".join(f"{t} / {lv}" for t, lv in columns) + " |")
@@ -219,8 +286,11 @@ def board_table(board: list[dict]) -> pa.Table:
         row = {"controller": e["controller"], "runs": e["runs"], "failures": e["failures"]}
         for key in (*STATISTICS, f"improvement_over_{BASELINE}", f"improvement_over_{TUNED}"):
             summary = e[key] or {}
-            row |= {f"{key}_mean": summary.get("mean"), f"{key}_ci_low": summary.get("ci_low"),
-                    f"{key}_ci_high": summary.get("ci_high")}
+            row |= {
+                f"{key}_mean": summary.get("mean"),
+                f"{key}_ci_low": summary.get("ci_low"),
+                f"{key}_ci_high": summary.get("ci_high"),
+            }
         flat.append(row)
     return pa.Table.from_pylist(flat)
 
@@ -233,32 +303,59 @@ def figures(records: dict[str, dict], controllers: Sequence[str], suite: Suite) 
     out = {}
     rows = [r for r in _rows(records, "robustness") if r["status"] == "ok" and r.get("e_tr_mean") is not None]
     columns = min(4, len(controllers))
-    fig, axes = plt.subplots(math.ceil(len(controllers) / columns), columns, squeeze=False, layout="constrained",
-                             figsize=(3.2 * columns, 2.8 * math.ceil(len(controllers) / columns)))
+    fig, axes = plt.subplots(
+        math.ceil(len(controllers) / columns),
+        columns,
+        squeeze=False,
+        layout="constrained",
+        figsize=(3.2 * columns, 2.8 * math.ceil(len(controllers) / columns)),
+    )
     values = [r["e_tr_mean"] for r in rows] or [1e-3]
     low, high = max(min(values), 1e-5), max(values)
     for ax, name in zip(axes.flat, controllers, strict=False):
         grid = np.full((len(suite.robustness_mass), len(suite.robustness_friction)), np.nan)
         for i, mass in enumerate(suite.robustness_mass):
             for j, friction in enumerate(suite.robustness_friction):
-                cell = [r["e_tr_mean"] for r in rows if r["controller"] == name and r["mass_factor"] == mass
-                        and r["friction_factor"] == friction]
+                cell = [
+                    r["e_tr_mean"]
+                    for r in rows
+                    if r["controller"] == name and r["mass_factor"] == mass and r["friction_factor"] == friction
+                ]
                 grid[i, j] = np.mean(cell) if cell else np.nan
-        image = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis",
-                          norm=plt.matplotlib.colors.LogNorm(vmin=low, vmax=max(high, low * 1.01)))
-        ax.set(title=name, xticks=range(len(suite.robustness_friction)), yticks=range(len(suite.robustness_mass)),
-               xticklabels=[f"{f:g}" for f in suite.robustness_friction],
-               yticklabels=[f"{m:g}" for m in suite.robustness_mass], xlabel="friction x paper", ylabel="mass x nominal")
-    for ax in list(axes.flat)[len(controllers):]:
+        image = ax.imshow(
+            grid,
+            origin="lower",
+            aspect="auto",
+            cmap="viridis",
+            norm=plt.matplotlib.colors.LogNorm(vmin=low, vmax=max(high, low * 1.01)),
+        )
+        ax.set(
+            title=name,
+            xticks=range(len(suite.robustness_friction)),
+            yticks=range(len(suite.robustness_mass)),
+            xticklabels=[f"{f:g}" for f in suite.robustness_friction],
+            yticklabels=[f"{m:g}" for m in suite.robustness_mass],
+            xlabel="friction x paper",
+            ylabel="mass x nominal",
+        )
+    for ax in list(axes.flat)[len(controllers) :]:
         ax.axis("off")
     fig.colorbar(image, ax=axes, label="mean e_tr [m] (circle, NaN: failed)")
     out["robustness.png"] = fig
     board_rows = [r for r in _rows(records, "leaderboard") if r["status"] == "ok" and r.get("e_tr_mean") is not None]
-    fig, axes = plt.subplots(1, len(suite.trajectories), squeeze=False, layout="constrained",
-                             figsize=(max(4.0, 0.45 * len(controllers)) * len(suite.trajectories) / 1.5, 4.0))
+    fig, axes = plt.subplots(
+        1,
+        len(suite.trajectories),
+        squeeze=False,
+        layout="constrained",
+        figsize=(max(4.0, 0.45 * len(controllers)) * len(suite.trajectories) / 1.5, 4.0),
+    )
     for ax, trajectory in zip(axes.flat, suite.trajectories, strict=True):
-        data = [[r["e_tr_mean"] for r in board_rows if r["controller"] == name and r["trajectory"] == trajectory]
-                or [np.nan] for name in controllers]
+        data = [
+            [r["e_tr_mean"] for r in board_rows if r["controller"] == name and r["trajectory"] == trajectory]
+            or [np.nan]
+            for name in controllers
+        ]
         ax.boxplot(data, tick_labels=controllers)
         ax.set_yscale("log")
         ax.set_title(trajectory)
@@ -275,8 +372,14 @@ def tune_on_paper_cases(steps: int, seeds: int = 2) -> list[float]:
     return list(tune(problems(specs, range(seeds)), specs[0].controller.gains, steps=steps).gains)
 
 
-def run_suite(suite: Suite, controllers: Sequence[str], out: Path, client: Any, *,
-              on_record: Callable[[int, int], None] = lambda done, total: None) -> dict:
+def run_suite(
+    suite: Suite,
+    controllers: Sequence[str],
+    out: Path,
+    client: Any,
+    *,
+    on_record: Callable[[int, int], None] = lambda done, total: None,
+) -> dict:
     """Tune (or reuse ``out/tuned.toml``), run every cell through the sweep runner, write the leaderboard
     (``leaderboard.md``, ``.csv``, ``.parquet``), the per-run ``results.parquet``/``.csv`` and the figures."""
     import tomllib
@@ -290,8 +393,10 @@ def run_suite(suite: Suite, controllers: Sequence[str], out: Path, client: Any, 
             tuned = tomllib.loads(stored.read_text())["controller"]["gains"]
         else:
             tuned = tune_on_paper_cases(suite.tune_steps)
-            text = f"# ddtrack bench: gains tuned by ddtrack tune on paper_line and paper_square\n[controller]\n" \
-                   f"kind = \"backstepping\"\ngains = {toml_value(tuned)}\n"
+            text = (
+                f"# ddtrack bench: gains tuned by ddtrack tune on paper_line and paper_square\n[controller]\n"
+                f'kind = "backstepping"\ngains = {toml_value(tuned)}\n'
+            )
             atomic_write(stored, lambda f: f.write(text.encode()))
     plan = plan_suite(suite, controllers, tuned)
     outcome = run_sweep(plan, out, client, on_record=on_record)
@@ -307,7 +412,15 @@ def run_suite(suite: Suite, controllers: Sequence[str], out: Path, client: Any, 
     for file, fig in figures(records, controllers, suite).items():
         atomic_write(out / file, lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
         plt.close(fig)
-    summary = {"suite": dataclasses.asdict(suite), "controllers": list(controllers), "tuned_gains": tuned, "runs": outcome.total,
-               "reused": outcome.reused, "errors": outcome.errors, "not_ok": outcome.not_ok, "leaderboard": board}
+    summary = {
+        "suite": dataclasses.asdict(suite),
+        "controllers": list(controllers),
+        "tuned_gains": tuned,
+        "runs": outcome.total,
+        "reused": outcome.reused,
+        "errors": outcome.errors,
+        "not_ok": outcome.not_ok,
+        "leaderboard": board,
+    }
     atomic_write(out / "leaderboard.json", lambda f: f.write((json.dumps(summary, indent=2) + "\n").encode()))
     return summary

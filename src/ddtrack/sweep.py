@@ -11,6 +11,7 @@ The driver owns the store: workers only compute and return records; the driver w
 records, and the next start submits only the keys that have none (records with status ``error`` are
 retried). ``results.parquet`` and ``results.csv`` (sorted by key) are written at the end.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.csv  # noqa: F401  (pa.csv)
+import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -94,12 +95,12 @@ class SweepFile(_Model):
             raise FieldError("grid", "give exactly one of [grid] and [random]")
         if self.grid is not None:
             if not self.grid:
-                raise FieldError("grid", "is empty; give at least one \"section.key\" = [values]")
+                raise FieldError("grid", 'is empty; give at least one "section.key" = [values]')
             for name, values in self.grid.items():
                 if not values:
                     raise FieldError(f"grid.{name}", "has no values")
         if self.random is not None and not self.random.__pydantic_extra__:
-            raise FieldError("random", "draws nothing; add \"section.key\" = {low = ..., high = ...}")
+            raise FieldError("random", 'draws nothing; add "section.key" = {low = ..., high = ...}')
         if self.controllers is not None and len(set(self.controllers)) != len(self.controllers):
             raise FieldError("controllers", "lists a controller twice")
         if isinstance(self.seeds, int) and not 1 <= self.seeds <= 1_000_000:
@@ -204,7 +205,9 @@ def toml_value(value: Any) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        return (
+            repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        )
     if isinstance(value, str):
         return json.dumps(value)  # a JSON string is a valid TOML basic string
     if isinstance(value, list | tuple):
@@ -261,24 +264,31 @@ def plan_sweep(sweep: SweepFile, base_dir: Path) -> Plan:
 # --- the tasks -----------------------------------------------------------------------------------
 
 
-
-
-def run_chunk(scenario: Scenario, configuration: dict[str, Any], runs: Sequence[tuple[str, int]],
-              chunk: int) -> list[dict]:
+def run_chunk(
+    scenario: Scenario, configuration: dict[str, Any], runs: Sequence[tuple[str, int]], chunk: int
+) -> list[dict]:
     """The task: simulate ``runs`` ((key, seed) pairs, at most ``chunk``) as one vmapped batch, padded to
     ``chunk`` runs; return one record per run. An exception becomes error records, not a lost task."""
     enable_compilation_cache()
     seeds = [seed for _, seed in runs]
     try:
         rows = monte_carlo(scenario, seeds + [seeds[0]] * (chunk - len(seeds)), chunk_size=chunk)[: len(seeds)]
-    except Exception as exc:  # noqa: BLE001  (any failure of the run is recorded with its text)
+    except Exception as exc:
         text = "".join(traceback.format_exception_only(exc)).strip()
         return [error_record(key, configuration, seed, text) for key, seed in runs]
     records = []
     for (key, seed), row in zip(runs, rows, strict=True):
         metrics = {k: v for k, v in row.items() if k != "seed"}
-        records.append({"key": key, "configuration": configuration, "seed": seed, "status": metrics["status"],
-                        "metrics": _finite(metrics), "error": None})
+        records.append(
+            {
+                "key": key,
+                "configuration": configuration,
+                "seed": seed,
+                "status": metrics["status"],
+                "metrics": _finite(metrics),
+                "error": None,
+            }
+        )
     return records
 
 
@@ -344,8 +354,13 @@ def table(records: Sequence[dict]) -> pa.Table:
     records = sorted(records, key=lambda r: r["key"])
     rows = []
     for r in records:
-        row = {"key": r["key"], "controller": r["configuration"]["controller"], "seed": r["seed"],
-               "status": r["status"], "error": r["error"]}
+        row = {
+            "key": r["key"],
+            "controller": r["configuration"]["controller"],
+            "seed": r["seed"],
+            "status": r["status"],
+            "error": r["error"],
+        }
         row |= {f"label.{k}": v for k, v in r["configuration"].get("labels", {}).items()}
         row |= {f"set.{k}": v for k, v in r["configuration"]["overrides"].items()}
         metrics = dict(r["metrics"] or {})
@@ -353,10 +368,15 @@ def table(records: Sequence[dict]) -> pa.Table:
         gains = metrics.pop("final_gains", None) or [None, None, None]
         metrics.pop("status", None)
         warnings = metrics.pop("warnings", None) or []
-        row |= metrics | {"window_start": window[0], "window_end": window[1], "final_kx": gains[0],
-                          "final_ky": gains[1], "final_ktheta": gains[2],
-                          "warning_codes": ",".join(w["code"] for w in warnings),
-                          "warnings": " | ".join(w["message"] for w in warnings)}
+        row |= metrics | {
+            "window_start": window[0],
+            "window_end": window[1],
+            "final_kx": gains[0],
+            "final_ky": gains[1],
+            "final_ktheta": gains[2],
+            "warning_codes": ",".join(w["code"] for w in warnings),
+            "warnings": " | ".join(w["message"] for w in warnings),
+        }
         rows.append(row)
     names: dict[str, None] = {}
     for row in rows:
@@ -391,8 +411,9 @@ class Outcome:
     warnings: dict  #: warning code -> runs that carry it (``metrics.json``'s ``warnings``)
 
 
-def run_sweep(plan: Plan, out: Path, client: Any, *,
-              on_record: Callable[[int, int], None] = lambda done, total: None) -> Outcome:
+def run_sweep(
+    plan: Plan, out: Path, client: Any, *, on_record: Callable[[int, int], None] = lambda done, total: None
+) -> Outcome:
     """Submit the runs that have no record to ``client``'s cluster, write records as tasks finish, then
     the results tables. ``on_record(done, total)`` follows progress."""
     from distributed import as_completed
@@ -407,9 +428,10 @@ def run_sweep(plan: Plan, out: Path, client: Any, *,
         configuration = plan.configurations[index]
         runs.sort(key=lambda pair: pair[1])
         for start in range(0, len(runs), plan.chunk):
-            part = runs[start:start + plan.chunk]
-            future = client.submit(run_chunk, configuration.scenario, configuration.describe(), part, plan.chunk,
-                                   pure=False)
+            part = runs[start : start + plan.chunk]
+            future = client.submit(
+                run_chunk, configuration.scenario, configuration.describe(), part, plan.chunk, pure=False
+            )
             futures[future] = (configuration.describe(), part)
     done = len(existing)
     on_record(done, len(plan.runs))
@@ -420,7 +442,7 @@ def run_sweep(plan: Plan, out: Path, client: Any, *,
         else:  # the task could not run at all (e.g. it killed its workers too often): record why
             try:
                 exc = future.exception()
-            except Exception as cancelled:  # noqa: BLE001  (a cancelled future raises instead of returning)
+            except Exception as cancelled:
                 exc = cancelled
             text = "".join(traceback.format_exception_only(exc)).strip()
             records = [error_record(key, configuration, seed, text) for key, seed in part]
@@ -431,10 +453,14 @@ def run_sweep(plan: Plan, out: Path, client: Any, *,
         future.release()
     final = {key: r for key, r in read_records(out).items() if key in plan.runs}
     write_results(out, list(final.values()))
-    return Outcome(total=len(plan.runs), reused=len(existing), ran=len(plan.runs) - len(existing),
-                   errors=sum(r["status"] == ERROR for r in final.values()),
-                   not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()),
-                   warnings=warning_counts([r["metrics"] or {"warnings": []} for r in final.values()]))
+    return Outcome(
+        total=len(plan.runs),
+        reused=len(existing),
+        ran=len(plan.runs) - len(existing),
+        errors=sum(r["status"] == ERROR for r in final.values()),
+        not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()),
+        warnings=warning_counts([r["metrics"] or {"warnings": []} for r in final.values()]),
+    )
 
 
 def local_cluster(workers: int) -> Any:
@@ -445,9 +471,27 @@ def local_cluster(workers: int) -> Any:
 
     # the scheduler serves its HTTP endpoints whatever the dashboard setting (None still takes :8787, and warns when
     # another cluster holds it): a free port on loopback instead
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                        dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    return LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        silence_logs=logging.ERROR,
+    )
 
 
-__all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep",
-           "run_chunk", "run_key", "run_sweep", "table", "write_results"]
+__all__ = [
+    "Configuration",
+    "Outcome",
+    "Plan",
+    "SweepFile",
+    "plan_sweep",
+    "read_records",
+    "read_sweep",
+    "run_chunk",
+    "run_key",
+    "run_sweep",
+    "table",
+    "write_results",
+]

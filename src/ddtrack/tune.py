@@ -12,6 +12,7 @@ optimised in log space with Adam, so they stay positive, and clipped to ``[gain_
 This gives the paper's online gain law (model.md §3) a fair opponent: backstepping whose constant gains were chosen
 as well as the same cost allows on the same training runs, instead of by hand.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -66,48 +67,77 @@ def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Proble
     """Each training scenario prepared once for all the seeds (one vmapped batch each)."""
     for scenario in scenarios:
         if scenario.controller.kind not in TUNABLE:
-            raise ConfigError("--controller", f"'{scenario.controller.kind}' has no tunable gains here",
-                              f"tune one of: {', '.join(TUNABLE)}")
-    return [Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
-            for scenario in scenarios]
+            raise ConfigError(
+                "--controller",
+                f"'{scenario.controller.kind}' has no tunable gains here",
+                f"tune one of: {', '.join(TUNABLE)}",
+            )
+    return [
+        Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
+        for scenario in scenarios
+    ]
 
 
-def rollout_loss(problem: Problem, gains: jax.Array, gamma: jax.Array, effort_weight: float,
-                 whole_run: bool = False) -> jax.Array:
+def rollout_loss(
+    problem: Problem, gains: jax.Array, gamma: jax.Array, effort_weight: float, whole_run: bool = False
+) -> jax.Array:
     """Mean over the batch's runs of sum_k (J_k (eq. 22) + effort_weight |tau_k|^2) T_c, over the metric window
     (or the whole run)."""
     sim = problem.scenario.simulation
     fields = TUNABLE[problem.scenario.controller.kind]
     controller = problem.setup.controller
     runs = len(problem.setup.x0)
-    outer = dataclasses.replace(controller.outer, **{f: jnp.broadcast_to(gains[i], (runs,)) for i, f in enumerate(fields)})
-    result = simulate_batch(DynamicPlant(problem.setup.plant_params), dataclasses.replace(controller, outer=outer),
-                            problem.setup.trajectory, problem.setup.x0, problem.draws, problem.setup.disturbance,
-                            problem.setup.noise, n_steps=sim.n_steps, control_period=sim.control_period,
-                            substeps=sim.substeps, divergence_error=problem.divergence_error)
+    outer = dataclasses.replace(
+        controller.outer, **{f: jnp.broadcast_to(gains[i], (runs,)) for i, f in enumerate(fields)}
+    )
+    result = simulate_batch(
+        DynamicPlant(problem.setup.plant_params),
+        dataclasses.replace(controller, outer=outer),
+        problem.setup.trajectory,
+        problem.setup.x0,
+        problem.draws,
+        problem.setup.disturbance,
+        problem.setup.noise,
+        n_steps=sim.n_steps,
+        control_period=sim.control_period,
+        substeps=sim.substeps,
+        divergence_error=problem.divergence_error,
+    )
     t = np.arange(sim.n_steps) * sim.control_period
     counted = np.ones(sim.n_steps) if whole_run else window_mask(t, sim.window).astype(float)
     per_period = 0.5 * jnp.sum(gamma * result.error**2, axis=-1) + effort_weight * jnp.sum(result.control**2, axis=-1)
     return jnp.mean(jnp.sum(per_period * counted, axis=1)) * sim.control_period
 
 
-def total_loss(training: Sequence[Problem], log_gains: jax.Array, gamma: jax.Array, effort_weight: float,
-               whole_run: bool = False) -> jax.Array:
+def total_loss(
+    training: Sequence[Problem], log_gains: jax.Array, gamma: jax.Array, effort_weight: float, whole_run: bool = False
+) -> jax.Array:
     """The mean of :func:`rollout_loss` over the training scenarios, as a function of log(gains)."""
     gains = jnp.exp(log_gains)
     return sum(rollout_loss(p, gains, gamma, effort_weight, whole_run) for p in training) / len(training)
 
 
-def tune(training: Sequence[Problem], initial: Sequence[float], *, steps: int = 40, learning_rate: float = 0.1,
-         gamma: Sequence[float] = DEFAULT_GAMMA, effort_weight: float = 0.0, whole_run: bool = False,
-         gain_min: Sequence[float] = (0.05, 0.5, 0.05), gain_max: Sequence[float] = (20.0, 2000.0, 200.0),
-         on_step: Callable[[dict], None] = lambda record: None) -> TuneResult:
+def tune(
+    training: Sequence[Problem],
+    initial: Sequence[float],
+    *,
+    steps: int = 40,
+    learning_rate: float = 0.1,
+    gamma: Sequence[float] = DEFAULT_GAMMA,
+    effort_weight: float = 0.0,
+    whole_run: bool = False,
+    gain_min: Sequence[float] = (0.05, 0.5, 0.05),
+    gain_max: Sequence[float] = (20.0, 2000.0, 200.0),
+    on_step: Callable[[dict], None] = lambda record: None,
+) -> TuneResult:
     """Adam on log(gains) for ``steps`` iterations; keeps the best gains seen (the loss is not convex).
 
     A step whose loss or gradient is not finite (a run that blew up) is undone and the step size halved.
     """
     gamma_array = jnp.asarray(gamma, float)
-    loss_and_grad = jax.jit(jax.value_and_grad(lambda lg: total_loss(training, lg, gamma_array, effort_weight, whole_run)))
+    loss_and_grad = jax.jit(
+        jax.value_and_grad(lambda lg: total_loss(training, lg, gamma_array, effort_weight, whole_run))
+    )
     low, high = np.log(np.asarray(gain_min, float)), np.log(np.asarray(gain_max, float))
     log_gains = np.clip(np.log(np.asarray(initial, float)), low, high)
     first, second = np.zeros_like(log_gains), np.zeros_like(log_gains)
@@ -116,8 +146,12 @@ def tune(training: Sequence[Problem], initial: Sequence[float], *, steps: int = 
     for step in range(steps + 1):  # the last evaluation only scores the final gains
         loss, grad = (np.asarray(v, float) for v in loss_and_grad(jnp.asarray(log_gains)))
         finite = bool(np.isfinite(loss) and np.all(np.isfinite(grad)))
-        record = {"step": step, "loss": float(loss) if finite else None,
-                  "gains": [float(g) for g in np.exp(log_gains)], "learning_rate": rate}
+        record = {
+            "step": step,
+            "loss": float(loss) if finite else None,
+            "gains": [float(g) for g in np.exp(log_gains)],
+            "learning_rate": rate,
+        }
         history.append(record)
         on_step(record)
         if finite and loss < best[0]:
@@ -132,8 +166,11 @@ def tune(training: Sequence[Problem], initial: Sequence[float], *, steps: int = 
         update = (first / (1 - 0.9 ** (step + 1))) / (np.sqrt(second / (1 - 0.999 ** (step + 1))) + 1e-8)
         log_gains = np.clip(log_gains - rate * update, low, high)
     if history[0]["loss"] is None:
-        raise ConfigError("controller.gains", "the initial gains already give non-finite runs",
-                          "start from gains that track, e.g. the scenario's own")
+        raise ConfigError(
+            "controller.gains",
+            "the initial gains already give non-finite runs",
+            "start from gains that track, e.g. the scenario's own",
+        )
     return TuneResult(tuple(float(g) for g in np.exp(best[1])), history, history[0]["loss"], best[0])
 
 
@@ -144,11 +181,25 @@ def write(out: Path, result: TuneResult, kind: str, settings: dict) -> None:
     header = "# ddtrack tune: paste into a scenario, or pass as --set controller.gains=[...]\n"
     atomic_write(out / "tuned.toml", lambda f: f.write((header + tomli_w.dumps(fragment)).encode()))
     lines = ["step,loss,kx,ky,ktheta,learning_rate"] + [
-        f"{r['step']},{'' if r['loss'] is None else repr(r['loss'])},{','.join(map(repr, r['gains']))},{r['learning_rate']!r}"
-        for r in result.history]
+        ",".join(
+            [
+                str(r["step"]),
+                "" if r["loss"] is None else repr(r["loss"]),
+                *map(repr, r["gains"]),
+                repr(r["learning_rate"]),
+            ]
+        )
+        for r in result.history
+    ]
     atomic_write(out / "loss.csv", lambda f: f.write(("\n".join(lines) + "\n").encode()))
-    summary = {"kind": kind, "gains": list(result.gains), "initial_loss": result.initial_loss,
-               "final_loss": result.final_loss, "settings": settings, "history": result.history}
+    summary = {
+        "kind": kind,
+        "gains": list(result.gains),
+        "initial_loss": result.initial_loss,
+        "final_loss": result.final_loss,
+        "settings": settings,
+        "history": result.history,
+    }
     atomic_write(out / "tune.json", lambda f: f.write((json.dumps(summary, indent=2) + "\n").encode()))
     atomic_write(out / "loss.png", lambda f: _loss_figure(result, f))
 

@@ -1,4 +1,5 @@
 """Controllers: the protocol, inner loops and Kanayama backstepping (model.md §2)."""
+
 from .backstepping import Backstepping, clamp_command, kanayama_command, kanayama_command_rate, lyapunov
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw
 from .dither import Dithered
@@ -16,8 +17,29 @@ from .nn_adaptive import (
 )
 
 __all__ = [
-    "MLP", "AdaptiveMemory", "Dithered", "Emulator", "NNAdaptiveBackstepping", "Scales", "cost_gradient",
-    "emulator_scales", "error_jacobian_body", "gain_sensitivity", "init_mlp", "one_step_coefficient",
-    "Backstepping", "Cascade", "ComputedTorque", "Controller", "Logs", "TorqueLaw", "VelocityCommand", "VelocityLaw",
-    "WheelPD", "clamp_command", "kanayama_command", "kanayama_command_rate", "lyapunov",
+    "MLP",
+    "AdaptiveMemory",
+    "Backstepping",
+    "Cascade",
+    "ComputedTorque",
+    "Controller",
+    "Dithered",
+    "Emulator",
+    "Logs",
+    "NNAdaptiveBackstepping",
+    "Scales",
+    "TorqueLaw",
+    "VelocityCommand",
+    "VelocityLaw",
+    "WheelPD",
+    "clamp_command",
+    "cost_gradient",
+    "emulator_scales",
+    "error_jacobian_body",
+    "gain_sensitivity",
+    "init_mlp",
+    "kanayama_command",
+    "kanayama_command_rate",
+    "lyapunov",
+    "one_step_coefficient",
 ]

@@ -1,5 +1,6 @@
 """Kanayama backstepping: the kinematic law (paper eq. 12), its analytic derivative (model.md §2.5) and
 the Lyapunov function (eq. 13)."""
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -27,8 +28,9 @@ def kanayama_command_rate(error: Array, nu: Array, ref: Reference, gains: Array)
     kx, ky, kth = gains[0], gains[1], gains[2]
     de_x, de_y, de_th = error_rates(error, nu[0], nu[1], ref.v, ref.omega)
     v_dot = ref.v_dot * jnp.cos(e_th) - ref.v * jnp.sin(e_th) * de_th + kx * de_x
-    omega_dot = (ref.omega_dot + ref.v_dot * (ky * e_y + kth * jnp.sin(e_th))
-                 + ref.v * (ky * de_y + kth * jnp.cos(e_th) * de_th))
+    omega_dot = (
+        ref.omega_dot + ref.v_dot * (ky * e_y + kth * jnp.sin(e_th)) + ref.v * (ky * de_y + kth * jnp.cos(e_th) * de_th)
+    )
     return jnp.stack([v_dot, omega_dot])
 
 
@@ -43,16 +45,17 @@ def clamp_command(nu_c: Array, nu_c_dot: Array, limits: Array) -> tuple[Array, A
     Returns the clamped command, its derivative and 1.0 if any channel was clamped (else 0.0).
     """
     clamped = jnp.abs(nu_c) > limits
-    return (jnp.clip(nu_c, -limits, limits), jnp.where(clamped, 0.0, nu_c_dot),
-            jnp.any(clamped).astype(nu_c.dtype))
+    return (jnp.clip(nu_c, -limits, limits), jnp.where(clamped, 0.0, nu_c_dot), jnp.any(clamped).astype(nu_c.dtype))
 
 
-def velocity_command(error: Array, nu: Array, ref: Reference, gains: Array, limits: Array,
-                     strict: bool) -> VelocityCommand:
+def velocity_command(
+    error: Array, nu: Array, ref: Reference, gains: Array, limits: Array, strict: bool
+) -> VelocityCommand:
     """The Kanayama command for ``gains``, its analytic rate, the clamps, and (``strict``) the cross term
     [e_x, sin(e_th)/Ky] for the inner loop: what every Kanayama-based outer law hands the inner loop."""
-    nu_c, nu_c_dot, saturated = clamp_command(kanayama_command(error, ref, gains),
-                                              kanayama_command_rate(error, nu, ref, gains), limits)
+    nu_c, nu_c_dot, saturated = clamp_command(
+        kanayama_command(error, ref, gains), kanayama_command_rate(error, nu, ref, gains), limits
+    )
     feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if strict else jnp.zeros(2)
     return VelocityCommand(nu_c, nu_c_dot, feedback, saturated)
 
@@ -94,5 +97,8 @@ class Backstepping:
 
     def step(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[Array, tuple[()], Logs]:
         command, memory, logs = self.command(t, y, ref, memory)
-        return command.nu_c, memory, {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1],
-                                      "saturated": command.saturated, **logs}
+        return (
+            command.nu_c,
+            memory,
+            {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated, **logs},
+        )

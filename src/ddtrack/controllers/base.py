@@ -9,6 +9,7 @@ One calling convention for every controller (docs/architecture.md)::
 [N m], or (v, omega) for a kinematic plant); ``logs`` is a flat dict of float64 scalars that is
 recorded and never fed back. Everything that evolves lives in ``memory``.
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple, Protocol
@@ -96,6 +97,11 @@ class Cascade:
         tau, torque_saturated, inner_memory = self.inner.torque(y, command, inner_memory)
         saturated = jnp.maximum(command.saturated, torque_saturated)
         outer_memory = self.outer.observe(outer_memory, saturated)
-        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": saturated,
-                **outer_logs, **inner_logs}
+        logs = {
+            "v_cmd": command.nu_c[0],
+            "omega_cmd": command.nu_c[1],
+            "saturated": saturated,
+            **outer_logs,
+            **inner_logs,
+        }
         return tau, (outer_memory, inner_memory), logs

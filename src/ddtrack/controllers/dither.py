@@ -1,4 +1,5 @@
 """A small random dither on an outer law's command, for identification experiments (model.md §3.7)."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -24,8 +25,9 @@ class Dithered:
         law_key, dither_key = jax.random.split(key)
         return self.law.init(x0, ref0, law_key), dither_key
 
-    def command(self, t: Array, y: Array, ref: Reference, memory: tuple[Any, Array]
-                ) -> tuple[VelocityCommand, tuple[Any, Array], Logs]:
+    def command(
+        self, t: Array, y: Array, ref: Reference, memory: tuple[Any, Array]
+    ) -> tuple[VelocityCommand, tuple[Any, Array], Logs]:
         law_memory, key = memory
         command, law_memory, logs = self.law.command(t, y, ref, law_memory)
         key, draw = jax.random.split(key)

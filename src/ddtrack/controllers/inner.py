@@ -2,6 +2,7 @@
 
 Both saturate at the nominal ``max_torque`` and report whether they did.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -37,7 +38,9 @@ class ComputedTorque:
         nu = y[3:5]
         u = command.nu_c_dot + jnp.asarray(self.kc) * (command.nu_c - nu) + command.feedback
         generalised = reduced_mass(self.nominal) @ u + reduced_coriolis(self.nominal, nu)
-        tau = reduced_input_inverse(self.nominal) @ generalised + wheel_friction(self.nominal, wheel_speeds(self.nominal, nu))
+        tau = reduced_input_inverse(self.nominal) @ generalised + wheel_friction(
+            self.nominal, wheel_speeds(self.nominal, nu)
+        )
         tau, saturated = _saturate(tau, self.nominal.max_torque)
         return tau, saturated, memory
 

@@ -5,6 +5,7 @@ z~ = z / s_z,  h = tanh(W1 z~ + b1),  y~ = W2 h + b2,  y = s_y * y~.
 Pure functions over an :class:`MLP` pytree; training is per-sample backpropagation with momentum
 and global gradient-norm clipping.
 """
+
 from __future__ import annotations
 
 import jax
@@ -75,8 +76,9 @@ def backprop(mlp: MLP, z_normalised: Array, target_normalised: Array) -> MLP:
     return MLP(w1=jnp.outer(delta1, z_normalised), b1=delta1, w2=jnp.outer(delta2, h), b2=delta2)
 
 
-def momentum_step(mlp: MLP, velocity: MLP, gradient: MLP, *, learning_rate: Array, momentum: Array,
-                  clip_norm: Array) -> tuple[MLP, MLP]:
+def momentum_step(
+    mlp: MLP, velocity: MLP, gradient: MLP, *, learning_rate: Array, momentum: Array, clip_norm: Array
+) -> tuple[MLP, MLP]:
     """dW(k) = -eta * clip(grad) + beta * dW(k-1); W <- W + dW, for every weight array (model.md §3.7)."""
     norm = jnp.sqrt(total(jnp.concatenate([jnp.ravel(g**2) for g in jax.tree_util.tree_leaves(gradient)])))
     factor = jnp.minimum(1.0, clip_norm / jnp.maximum(norm, 1e-300))

@@ -12,6 +12,7 @@ One control period (model.md §3.8)::
     nu_c     = clamp(kanayama(e, ref, A)),  nu_c_dot analytic   eq. 12, model.md §2.5
     z_k      = [nu_c, nu_k]                                  the emulator's next training input
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -44,13 +45,15 @@ class Emulator:
         return jnp.concatenate([nu_c, nu]) if self.uses_velocity else nu_c
 
 
-def emulator_scales(control_period: float, *, uses_velocity: bool, max_velocity: float = 1.0,
-                    max_yaw_rate: float = 2.0) -> Scales:
+def emulator_scales(
+    control_period: float, *, uses_velocity: bool, max_velocity: float = 1.0, max_yaw_rate: float = 2.0
+) -> Scales:
     """s_z = [v_max, w_max(, v_max, w_max)], s_y = [T_c v_max, 0.05 T_c v_max, T_c w_max] (model.md §3.7)."""
     inputs = [max_velocity, max_yaw_rate] * (2 if uses_velocity else 1)
     tv = control_period * max_velocity
-    return Scales(inputs=jnp.asarray(inputs, float),
-                  outputs=jnp.asarray([tv, 0.05 * tv, control_period * max_yaw_rate], float))
+    return Scales(
+        inputs=jnp.asarray(inputs, float), outputs=jnp.asarray([tv, 0.05 * tv, control_period * max_yaw_rate], float)
+    )
 
 
 def one_step_coefficient(bandwidth: Array, control_period: float) -> Array:
@@ -78,8 +81,15 @@ def cost_gradient(error: Array, ref: Reference, gamma: Array, plant_jacobian_bod
     return (gamma * error) @ error_jacobian_body(error, exact) @ plant_jacobian_body @ gain_sensitivity(error, ref)
 
 
-def sensitivity_step(sensitivity: Array, y: Array, ref: Reference, gains: Array, plant_jacobian_body: Array,
-                     scale: Array, control_period: float) -> Array:
+def sensitivity_step(
+    sensitivity: Array,
+    y: Array,
+    ref: Reference,
+    gains: Array,
+    plant_jacobian_body: Array,
+    scale: Array,
+    control_period: float,
+) -> Array:
     """Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J^n Phi(k), with J = R_3(theta) J_b^n c_bar
     (model.md §3.6 Mode B): the transition takes the real J, the input the normalised J^n = J / c_bar (``scale``), so
     Sigma = (d q / d alpha) / c_bar, in the units of Mode A's J^n Phi. The clamps are ignored, as in Phi."""
@@ -87,7 +97,9 @@ def sensitivity_step(sensitivity: Array, y: Array, ref: Reference, gains: Array,
     world_jacobian = rotation(theta) @ plant_jacobian_body
     command_of_pose = lambda q: kanayama_command(posture_error(q[0], q[1], q[2], ref.x, ref.y, ref.theta), ref, gains)  # noqa: E731
     pose_rate_jacobian = jnp.array([[0.0, 0.0, -v * jnp.sin(theta)], [0.0, 0.0, v * jnp.cos(theta)], [0.0, 0.0, 0.0]])
-    transition = jnp.eye(3) + control_period * pose_rate_jacobian + scale * world_jacobian @ jax.jacfwd(command_of_pose)(y[:3])
+    transition = (
+        jnp.eye(3) + control_period * pose_rate_jacobian + scale * world_jacobian @ jax.jacfwd(command_of_pose)(y[:3])
+    )
     error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
     return transition @ sensitivity + world_jacobian @ gain_sensitivity(error, ref)
 
@@ -161,8 +173,17 @@ class NNAdaptiveBackstepping:
         gains = jnp.asarray(self.gains, float)
         n_in = self.emulator.scales.inputs.shape[0]
         sensitivity = jnp.zeros((3, 3)) if self.jacobian == "model_sensitivity" else None
-        return AdaptiveMemory(gains, jnp.zeros(3), self.emulator.mlp, zeros_like(self.emulator.mlp), x0[:3],
-                              jnp.zeros(n_in), jnp.asarray(0.0), jnp.asarray(0.0), sensitivity)
+        return AdaptiveMemory(
+            gains,
+            jnp.zeros(3),
+            self.emulator.mlp,
+            zeros_like(self.emulator.mlp),
+            x0[:3],
+            jnp.zeros(n_in),
+            jnp.asarray(0.0),
+            jnp.asarray(0.0),
+            sensitivity,
+        )
 
     def _plant_jacobian(self, mlp: MLP, nu_c: Array, nu: Array) -> Array:
         """Body-frame J_b^n (3x2) of the configured source, normalised by c_bar (model.md §3.4)."""
@@ -180,8 +201,9 @@ class NNAdaptiveBackstepping:
             jb = jnp.array([[jnp.maximum(jb[0, 0], 0.0), 0.0], [0.0, 0.0], [0.0, jnp.maximum(jb[2, 1], 0.0)]])
         return jb
 
-    def command(self, t: Array, y: Array, ref: Reference, memory: AdaptiveMemory
-                ) -> tuple[VelocityCommand, AdaptiveMemory, Logs]:
+    def command(
+        self, t: Array, y: Array, ref: Reference, memory: AdaptiveMemory
+    ) -> tuple[VelocityCommand, AdaptiveMemory, Logs]:
         error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
         nu = y[3:5]
         scales, started = self.emulator.scales, memory.started > 0.5
@@ -194,39 +216,71 @@ class NNAdaptiveBackstepping:
         loss = jnp.where(started, sample_loss(memory.mlp, z_prev, target), 0.0)
         mlp, mlp_velocity = memory.mlp, memory.mlp_velocity
         if self.online_learning:
-            trained, velocity = momentum_step(mlp, mlp_velocity, backprop(mlp, z_prev, target),
-                                              learning_rate=self.learning_rate, momentum=self.momentum,
-                                              clip_norm=self.clip_norm)
+            trained, velocity = momentum_step(
+                mlp,
+                mlp_velocity,
+                backprop(mlp, z_prev, target),
+                learning_rate=self.learning_rate,
+                momentum=self.momentum,
+                clip_norm=self.clip_norm,
+            )
             keep = lambda new, old: jnp.where(learn, new, old)  # noqa: E731
-            mlp, mlp_velocity = jax.tree_util.tree_map(keep, trained, mlp), jax.tree_util.tree_map(
-                keep, velocity, mlp_velocity)
+            mlp, mlp_velocity = (
+                jax.tree_util.tree_map(keep, trained, mlp),
+                jax.tree_util.tree_map(keep, velocity, mlp_velocity),
+            )
 
         # adapt the gains (eqs. 22-26)
         limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
         gains = memory.gains
         nu_c_now = jnp.clip(kanayama_command(error, ref, gains), -limits, limits)
         jb = self._plant_jacobian(mlp, nu_c_now, nu)
-        gate = (started & (jnp.hypot(error[0], error[1]) < self.gate_error) & (memory.previous_saturated < 0.5)
-                & (t >= self.freeze_time))
+        gate = (
+            started
+            & (jnp.hypot(error[0], error[1]) < self.gate_error)
+            & (memory.previous_saturated < 0.5)
+            & (t >= self.freeze_time)
+        )
         sensitivity, c_v = memory.sensitivity, jnp.asarray(self.analytic_coefficients)[0]
         if self.jacobian == "model_sensitivity":
-            gradient = sensitivity_gradient(error, y, jnp.asarray(self.gamma), sensitivity, self.error_jacobian == "exact")
+            gradient = sensitivity_gradient(
+                error, y, jnp.asarray(self.gamma), sensitivity, self.error_jacobian == "exact"
+            )
             advanced = sensitivity_step(sensitivity, y, ref, gains, jb, c_v, self.control_period)
             sensitivity = jnp.where(gate, advanced, 0.0)
         else:
             gradient = cost_gradient(error, ref, jnp.asarray(self.gamma), jb, self.error_jacobian == "exact")
         initial = jnp.asarray(self.gains, float)
-        step = (-self.control_period * jnp.asarray(self.rates) * gradient + self.gain_momentum * memory.last_step
-                - self.control_period * self.leakage * (gains - initial))
+        step = (
+            -self.control_period * jnp.asarray(self.rates) * gradient
+            + self.gain_momentum * memory.last_step
+            - self.control_period * self.leakage * (gains - initial)
+        )
         step = jnp.where(gate, jnp.clip(step, -jnp.asarray(self.max_step), jnp.asarray(self.max_step)), 0.0)
         gains = jnp.clip(gains + step, jnp.asarray(self.gain_min), jnp.asarray(self.gain_max))
 
         # the Kanayama command with the new gains: the backstepping law's own code (so rates = 0 is it, bit for bit)
         command = velocity_command(error, nu, ref, gains, limits, self.strict)
-        memory = AdaptiveMemory(gains, step, mlp, mlp_velocity, y[:3], self.emulator.inputs(command.nu_c, nu),
-                                command.saturated, jnp.asarray(1.0), sensitivity)
-        logs = {"kx": gains[0], "ky": gains[1], "ktheta": gains[2], "emulator_loss": loss,
-                "jacobian_v": jb[0, 0], "jacobian_omega": jb[2, 1], "gate": gate.astype(float)}
+        memory = AdaptiveMemory(
+            gains,
+            step,
+            mlp,
+            mlp_velocity,
+            y[:3],
+            self.emulator.inputs(command.nu_c, nu),
+            command.saturated,
+            jnp.asarray(1.0),
+            sensitivity,
+        )
+        logs = {
+            "kx": gains[0],
+            "ky": gains[1],
+            "ktheta": gains[2],
+            "emulator_loss": loss,
+            "jacobian_v": jb[0, 0],
+            "jacobian_omega": jb[2, 1],
+            "gate": gate.astype(float),
+        }
         return command, memory, logs
 
     def observe(self, memory: AdaptiveMemory, saturated: Array) -> AdaptiveMemory:

@@ -12,6 +12,7 @@
 way. ``import ddtrack`` itself stays light: it registers the environment right after Gymnasium's own import,
 whether Gymnasium comes before or after ddtrack.)
 """
+
 from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry

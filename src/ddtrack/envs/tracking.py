@@ -61,13 +61,14 @@ that period and every remaining one at the cost bound 1/2 (50 D^2 + pi^2) + effo
 (|(e_x, e_y)| of the true state), ``state`` (the true [x, y, theta, v, omega]), ``seed`` (of the episode),
 ``control`` (the held input, wheel torques [N m]; ``step`` only) and, in gains mode, ``gains``.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 from functools import partial
 from os import PathLike
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium
 import jax
@@ -90,8 +91,13 @@ DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance an
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
 GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
 DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] at which a run diverges (simulate's default, as in a run)
-GAINS_CONTROLLERS = ("backstepping", "nn_adaptive_backstepping", "sliding_mode_backstepping",
-                     "adaptive_backstepping", "kinematic_backstepping")  #: kinds whose outer law is Kanayama's
+GAINS_CONTROLLERS = (
+    "backstepping",
+    "nn_adaptive_backstepping",
+    "sliding_mode_backstepping",
+    "adaptive_backstepping",
+    "kinematic_backstepping",
+)  #: kinds whose outer law is Kanayama's
 RESET_OPTIONS = ("initial_pose",)
 
 
@@ -146,8 +152,9 @@ def _start(episode: _Episode, x0: Array, key: Array, *, gains_mode: bool) -> tup
 
 
 @partial(jax.jit, static_argnames=("gains_mode", "substeps"))
-def _step(episode: _Episode, x: Array, memory: Any, k: Array, action: Array, *, gains_mode: bool,
-          substeps: int) -> tuple[Array, Any, Array]:
+def _step(
+    episode: _Episode, x: Array, memory: Any, k: Array, action: Array, *, gains_mode: bool, substeps: int
+) -> tuple[Array, Any, Array]:
     """Period k of :func:`ddtrack.sim.simulate`'s loop with the action in place of (or inside) the controller.
 
     Returns x_{k+1}, the controller's memory and the packed host data [observation, reward, status, e_tr,
@@ -168,11 +175,20 @@ def _step(episode: _Episode, x: Array, memory: Any, k: Array, action: Array, *, 
     else:
         gains = None
         u, next_memory = action * episode.torque_scale, memory
-    u, x_next = plant_period(episode.plant, x, u, t, episode.xi_disturbance[k], disturbance=episode.disturbance,
-                             control_period=episode.control_period, substeps=substeps)
+    u, x_next = plant_period(
+        episode.plant,
+        x,
+        u,
+        t,
+        episode.xi_disturbance[k],
+        disturbance=episode.disturbance,
+        control_period=episode.control_period,
+        substeps=substeps,
+    )
     error = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
-    status = period_status(x, x_next, u, error, divergence_error=episode.divergence_error,
-                           divergence_speed=DIVERGENCE_SPEED)
+    status = period_status(
+        x, x_next, u, error, divergence_error=episode.divergence_error, divergence_speed=DIVERGENCE_SPEED
+    )
     keep = status == 0
     x_next = jnp.where(keep, x_next, x)
     next_memory = jax.tree_util.tree_map(lambda new, old: jnp.where(keep, new, old), next_memory, memory)
@@ -205,18 +221,32 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         gains mode cannot drive, a negative ``effort_weight``, a ``render_mode``.
     """
 
-    metadata = {"render_modes": []}
+    metadata: ClassVar[dict[str, list[str]]] = {"render_modes": []}
 
-    def __init__(self, scenario: str | PathLike | Scenario | None = None, *, action_mode: str = "torque",
-                 effort_weight: float = DEFAULT_EFFORT_WEIGHT, render_mode: str | None = None) -> None:
+    def __init__(
+        self,
+        scenario: str | PathLike | Scenario | None = None,
+        *,
+        action_mode: str = "torque",
+        effort_weight: float = DEFAULT_EFFORT_WEIGHT,
+        render_mode: str | None = None,
+    ) -> None:
         if action_mode not in ACTION_MODES:
-            raise ConfigError("action_mode", f"unknown action mode {action_mode!r}",
-                              did_you_mean(str(action_mode), ACTION_MODES))
+            raise ConfigError(
+                "action_mode", f"unknown action mode {action_mode!r}", did_you_mean(str(action_mode), ACTION_MODES)
+            )
         if render_mode is not None:
-            raise ConfigError("render_mode", f"{render_mode!r} is not supported", "leave render_mode=None; "
-                              "plot a finished run with `ddtrack run` instead")
-        if isinstance(effort_weight, bool) or not isinstance(effort_weight, (int, float)) \
-                or not math.isfinite(effort_weight) or effort_weight < 0:
+            raise ConfigError(
+                "render_mode",
+                f"{render_mode!r} is not supported",
+                "leave render_mode=None; plot a finished run with `ddtrack run` instead",
+            )
+        if (
+            isinstance(effort_weight, bool)
+            or not isinstance(effort_weight, (int, float))
+            or not math.isfinite(effort_weight)
+            or effort_weight < 0
+        ):
             raise ConfigError("effort_weight", f"must be a finite number >= 0 (got {effort_weight!r})")
         given = _load(scenario)
         self.scenario = _scenario_for(given, action_mode)
@@ -240,13 +270,18 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         low32, high32 = np.asarray(low, np.float32), np.asarray(high, np.float32)
         self.observation_space = spaces.Box(low32, high32, dtype=np.float32)
         n_actions = 3 if self._gains_mode else 2
-        self.action_space = spaces.Box(-np.ones(n_actions, np.float32), np.ones(n_actions, np.float32),
-                                       dtype=np.float32)
+        self.action_space = spaces.Box(
+            -np.ones(n_actions, np.float32), np.ones(n_actions, np.float32), dtype=np.float32
+        )
         self._n_obs = len(low)
         self._constants = {
-            "control_period": sim.control_period, "n_steps": sim.n_steps, "divergence_error": distance,
-            "torque_scale": self.scenario.robot.max_torque, "effort_weight": self.effort_weight,
-            "obs_low": low32.astype(float), "obs_high": high32.astype(float),
+            "control_period": sim.control_period,
+            "n_steps": sim.n_steps,
+            "divergence_error": distance,
+            "torque_scale": self.scenario.robot.max_torque,
+            "effort_weight": self.effort_weight,
+            "obs_low": low32.astype(float),
+            "obs_high": high32.astype(float),
         }
         # the current episode's run objects (``ddtrack.runner.prepare``; x0 with the reset's options); torque mode
         # simulates DynamicPlant(setup.plant_params) whatever the scenario's controller
@@ -280,21 +315,35 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             x0 = x0.at[:3].set(jnp.asarray(pose, dtype=float))
         c = self._constants
         torque_max = float(setup.plant_params.max_torque) if plant.input_kind == "torque" else 0.0
-        cost_bound = 0.5 * (max(GAMMA[:2]) * c["divergence_error"] ** 2 + GAMMA[2] * math.pi**2) \
+        cost_bound = (
+            0.5 * (max(GAMMA[:2]) * c["divergence_error"] ** 2 + GAMMA[2] * math.pi**2)
             + self.effort_weight * 2 * torque_max**2
+        )
         if self._gains_mode:
             anchor = self.gain_anchor
             log_up, log_down = np.log(self.gain_max / anchor), np.log(anchor / self.gain_min)
         else:
             anchor = log_up = log_down = np.ones(3)
         self._episode = _Episode(
-            plant=plant, controller=setup.controller if self._gains_mode else None, trajectory=setup.trajectory,
-            disturbance=setup.disturbance, noise=setup.noise, xi_disturbance=draws.disturbance,
-            xi_noise=draws.noise, control_period=jnp.asarray(c["control_period"]),
-            n_steps=jnp.asarray(c["n_steps"]), divergence_error=jnp.asarray(c["divergence_error"]),
-            torque_scale=jnp.asarray(c["torque_scale"]), effort_weight=jnp.asarray(c["effort_weight"]),
-            cost_bound=jnp.asarray(cost_bound), gain_anchor=jnp.asarray(anchor), gain_log_up=jnp.asarray(log_up),
-            gain_log_down=jnp.asarray(log_down), obs_low=jnp.asarray(c["obs_low"]), obs_high=jnp.asarray(c["obs_high"]))
+            plant=plant,
+            controller=setup.controller if self._gains_mode else None,
+            trajectory=setup.trajectory,
+            disturbance=setup.disturbance,
+            noise=setup.noise,
+            xi_disturbance=draws.disturbance,
+            xi_noise=draws.noise,
+            control_period=jnp.asarray(c["control_period"]),
+            n_steps=jnp.asarray(c["n_steps"]),
+            divergence_error=jnp.asarray(c["divergence_error"]),
+            torque_scale=jnp.asarray(c["torque_scale"]),
+            effort_weight=jnp.asarray(c["effort_weight"]),
+            cost_bound=jnp.asarray(cost_bound),
+            gain_anchor=jnp.asarray(anchor),
+            gain_log_up=jnp.asarray(log_up),
+            gain_log_down=jnp.asarray(log_down),
+            obs_low=jnp.asarray(c["obs_low"]),
+            obs_high=jnp.asarray(c["obs_high"]),
+        )
         self._memory, packed = _start(self._episode, x0, draws.controller_key, gains_mode=self._gains_mode)
         self._x, self._k, self._done, self._seed = x0, 0, False, seed
         self.setup, self.draws = dataclasses.replace(setup, x0=x0), draws
@@ -312,11 +361,17 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         n_actions = self.action_space.shape[0]
         action = np.asarray(action, dtype=float)
         if action.shape != (n_actions,):
-            raise ConfigError("action", f"expected shape ({n_actions},) in {self.action_mode} mode, "
-                              f"got {action.shape}")
+            raise ConfigError("action", f"expected shape ({n_actions},) in {self.action_mode} mode, got {action.shape}")
         action = np.clip(action, -1.0, 1.0)  # NaN passes, and ends the episode as non_finite
-        self._x, self._memory, packed = _step(self._episode, self._x, self._memory, self._k, action,
-                                              gains_mode=self._gains_mode, substeps=self.scenario.simulation.substeps)
+        self._x, self._memory, packed = _step(
+            self._episode,
+            self._x,
+            self._memory,
+            self._k,
+            action,
+            gains_mode=self._gains_mode,
+            substeps=self.scenario.simulation.substeps,
+        )
         self._k += 1
         host = np.asarray(packed)
         n = self._n_obs
@@ -325,10 +380,16 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         terminated = status != "ok"
         truncated = not terminated and self._k >= self.scenario.simulation.n_steps
         self._done = terminated or truncated
-        info = {"t": self._k * self.scenario.simulation.control_period, "status": status, "e_tr": e_tr,
-                "state": host[n + 5:n + 10].copy(), "seed": self._seed, "control": host[n + 3:n + 5].copy()}
+        info = {
+            "t": self._k * self.scenario.simulation.control_period,
+            "status": status,
+            "e_tr": e_tr,
+            "state": host[n + 5 : n + 10].copy(),
+            "seed": self._seed,
+            "control": host[n + 3 : n + 5].copy(),
+        }
         if self._gains_mode:
-            info["gains"] = host[n + 10:n + 13].copy()
+            info["gains"] = host[n + 10 : n + 13].copy()
         return observation, reward, terminated, truncated, info
 
     # --- helpers --------------------------------------------------------------------------------
@@ -369,9 +430,11 @@ def _scenario_for(scenario: Scenario, action_mode: str) -> Scenario:
         return scenario
     config = scenario.controller
     if config.kind not in GAINS_CONTROLLERS:
-        raise ConfigError("action_mode", f"'gains' sets the gains of Kanayama backstepping, and this scenario's "
-                          f"controller.kind is {config.kind!r}",
-                          f"use action_mode='torque', or one of {', '.join(GAINS_CONTROLLERS)}")
+        raise ConfigError(
+            "action_mode",
+            f"'gains' sets the gains of Kanayama backstepping, and this scenario's controller.kind is {config.kind!r}",
+            f"use action_mode='torque', or one of {', '.join(GAINS_CONTROLLERS)}",
+        )
     if isinstance(config, NNAdaptiveConfig):  # the policy replaces the gradient law; gains and inner loop stay
         shared = {name: getattr(config, name) for name in BacksteppingConfig.model_fields if name != "kind"}
         return scenario.model_copy(update={"controller": BacksteppingConfig(kind="backstepping", **shared)})
@@ -393,6 +456,7 @@ def _initial_pose(options: dict[str, Any] | None) -> np.ndarray | None:
     except (TypeError, ValueError):
         pose = np.full(0, np.nan)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise ConfigError("options.initial_pose", f"expected 3 finite numbers [x, y, theta], "
-                          f"got {options['initial_pose']!r:.60}")
+        raise ConfigError(
+            "options.initial_pose", f"expected 3 finite numbers [x, y, theta], got {options['initial_pose']!r:.60}"
+        )
     return pose

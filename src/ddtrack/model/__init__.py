@@ -1,10 +1,11 @@
 """The robot: parameters, kinematics, Lagrangian dynamics, plants, disturbances and noise (model.md §1)."""
+
 from .disturbance import MeasurementNoise, WheelDisturbance
 from .dynamics import (
     body_acceleration,
     body_velocity,
-    coriolis_vector,
     constraint_matrix,
+    coriolis_vector,
     energy,
     input_matrix,
     mass_matrix,
@@ -21,8 +22,25 @@ from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, Plant
 
 __all__ = [
-    "DynamicPlant", "KinematicPlant", "MeasurementNoise", "Plant", "RobotParams", "WheelDisturbance",
-    "body_acceleration", "body_velocity", "constraint_matrix", "coriolis_vector", "energy", "input_matrix",
-    "mass_matrix", "pose_rate", "reduced_coriolis", "reduced_input", "reduced_input_inverse", "reduced_mass",
-    "velocity_basis", "wheel_friction", "wheel_speeds",
+    "DynamicPlant",
+    "KinematicPlant",
+    "MeasurementNoise",
+    "Plant",
+    "RobotParams",
+    "WheelDisturbance",
+    "body_acceleration",
+    "body_velocity",
+    "constraint_matrix",
+    "coriolis_vector",
+    "energy",
+    "input_matrix",
+    "mass_matrix",
+    "pose_rate",
+    "reduced_coriolis",
+    "reduced_input",
+    "reduced_input_inverse",
+    "reduced_mass",
+    "velocity_basis",
+    "wheel_friction",
+    "wheel_speeds",
 ]

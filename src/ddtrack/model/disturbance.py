@@ -4,6 +4,7 @@ One disturbance form covers every kind the scenarios name (none, constant, sinus
 ``tau_d(t_k) = bias + amplitude * sin(frequency * t_k + phase) + std * xi_k``, with ``xi_k`` standard
 normal draws made before the run from its seed and held over control period k.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp

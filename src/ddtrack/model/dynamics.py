@@ -3,6 +3,7 @@
 State ``X = [x, y, theta, v, omega]``: pose of the axle midpoint A [m, m, rad], forward speed [m/s]
 and yaw rate [rad/s]. Wheel torques ``tau = [tau_R, tau_L]`` [N m].
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -48,11 +49,13 @@ def mass_matrix(params: RobotParams, theta: Array) -> Array:
     """M(q) of the Euler-Lagrange equations with signed centre-of-mass offset d."""
     m, d = params.mass, params.com_offset
     c, s = jnp.cos(theta), jnp.sin(theta)
-    return jnp.array([
-        [m, 0.0, -m * d * s],
-        [0.0, m, m * d * c],
-        [-m * d * s, m * d * c, params.inertia + m * d**2],
-    ])
+    return jnp.array(
+        [
+            [m, 0.0, -m * d * s],
+            [0.0, m, m * d * c],
+            [-m * d * s, m * d * c, params.inertia + m * d**2],
+        ]
+    )
 
 
 def coriolis_vector(params: RobotParams, theta: Array, theta_dot: Array) -> Array:
@@ -95,9 +98,7 @@ def reduced_input_inverse(params: RobotParams) -> Array:
 
 def wheel_friction(params: RobotParams, phi_dot: Array) -> Array:
     """tau_f = b_w phi_dot + tau_c tanh(phi_dot / eps_f), per wheel, opposing the drive (model.md §1.2)."""
-    return params.viscous_friction * phi_dot + params.coulomb_friction * jnp.tanh(
-        phi_dot / params.friction_smoothing
-    )
+    return params.viscous_friction * phi_dot + params.coulomb_friction * jnp.tanh(phi_dot / params.friction_smoothing)
 
 
 def body_acceleration(params: RobotParams, nu: Array, tau: Array, tau_dist: Array) -> Array:

@@ -1,4 +1,5 @@
 """Physical parameters of a differential-drive robot (model.md §0, 1.4)."""
+
 from __future__ import annotations
 
 from .._pytree import pytree_dataclass

@@ -4,6 +4,7 @@ A plant is three pure functions: ``hold`` (what the held input does to the state
 control period), ``derivative`` (X_dot under the held input and disturbance) and ``saturate``
 (actuator limits).
 """
+
 from __future__ import annotations
 
 from typing import Protocol

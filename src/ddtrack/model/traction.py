@@ -13,6 +13,7 @@ disturbances were:
 A straight line at constant acceleration a needs mu = a / g; a steady circle at speed v and radius r needs
 mu = v^2 / (r g) (``tests/test_traction.py``). Pure NumPy: it runs on the recorded columns of any run.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,9 @@ def _rate(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.append(rate, rate[-1])
 
 
-def contact_forces(t, v, omega, *, mass: float, inertia_axle: float, com_offset: float,
-                   half_axle: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def contact_forces(
+    t, v, omega, *, mass: float, inertia_axle: float, com_offset: float, half_axle: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(F_R, F_L, F_y) [N]: the floor's longitudinal force on each wheel and its total lateral force, per sample."""
     t, v, omega = (np.asarray(a, dtype=float) for a in (t, v, omega))
     v_dot, omega_dot = _rate(t, v), _rate(t, omega)
@@ -42,11 +44,13 @@ def contact_forces(t, v, omega, *, mass: float, inertia_axle: float, com_offset:
     return (total + difference) / 2.0, (total - difference) / 2.0, lateral
 
 
-def required_friction(t, v, omega, *, mass: float, inertia_axle: float, com_offset: float,
-                      half_axle: float) -> np.ndarray:
+def required_friction(
+    t, v, omega, *, mass: float, inertia_axle: float, com_offset: float, half_axle: float
+) -> np.ndarray:
     """The friction coefficient the more loaded wheel needed at each sample, max_i |(F_i, F_y / 2)| / (m g / 2)."""
-    right, left, lateral = contact_forces(t, v, omega, mass=mass, inertia_axle=inertia_axle, com_offset=com_offset,
-                                          half_axle=half_axle)
+    right, left, lateral = contact_forces(
+        t, v, omega, mass=mass, inertia_axle=inertia_axle, com_offset=com_offset, half_axle=half_axle
+    )
     normal = mass * GRAVITY / 2.0
     return np.maximum(np.hypot(right, lateral / 2.0), np.hypot(left, lateral / 2.0)) / normal
 

@@ -1,4 +1,5 @@
 """Fixed-step integration."""
+
 from __future__ import annotations
 
 from collections.abc import Callable

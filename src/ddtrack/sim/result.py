@@ -1,4 +1,5 @@
 """The outcome of a simulation."""
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -12,9 +13,9 @@ STATUS_NAMES = ("ok", "diverged", "non_finite")
 REMEDIES = {
     "ok": "",
     "diverged": "the tracking error or the speed left its bounds: lower the gains, move the initial pose "
-                "closer to the reference, or raise simulation.divergence_error",
+    "closer to the reference, or raise simulation.divergence_error",
     "non_finite": "the state or the control became NaN/inf: shorten simulation.control_period, raise "
-                  "simulation.substeps, or check the controller",
+    "simulation.substeps, or check the controller",
 }
 
 
@@ -25,9 +26,11 @@ def remedy(status: str, columns: dict) -> str:
     saturated = columns.get("saturated")  # absent for a controller that logs no saturation
     # over at least 20 periods: a run that fails at once says nothing by its saturation
     if status == "diverged" and saturated is not None and len(saturated) >= 20 and np.mean(saturated > 0.5) >= 0.5:
-        return (f"the torque limit or a velocity clamp acted in {100 * np.mean(saturated > 0.5):.3g} % of the periods "
-                "before it: the robot could not do what the reference asked; slow the reference, raise "
-                "robot.max_torque or the controller's clamps if the robot allows, or start closer to the reference")
+        return (
+            f"the torque limit or a velocity clamp acted in {100 * np.mean(saturated > 0.5):.3g} % of the periods "
+            "before it: the robot could not do what the reference asked; slow the reference, raise "
+            "robot.max_torque or the controller's clamps if the robot allows, or start closer to the reference"
+        )
     return REMEDIES[status]
 
 
@@ -114,12 +117,23 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     nan = np.full(n, np.nan)
     columns = {
         "t": np.asarray(result.t, dtype=float)[rows],
-        "x": state[:, 0], "y": state[:, 1], "theta": state[:, 2], "v": state[:, 3], "omega": state[:, 4],
-        "x_ref": ref["x"], "y_ref": ref["y"],
+        "x": state[:, 0],
+        "y": state[:, 1],
+        "theta": state[:, 2],
+        "v": state[:, 3],
+        "omega": state[:, 4],
+        "x_ref": ref["x"],
+        "y_ref": ref["y"],
         "theta_ref": state[:, 2] + error[:, 2],  # continuous like theta; the reference's own is wrapped
-        "v_ref": ref["v"], "omega_ref": ref["omega"],
-        "e_x": error[:, 0], "e_y": error[:, 1], "e_theta": error[:, 2], "e_tr": np.hypot(error[:, 0], error[:, 1]),
-        "v_cmd": logs.pop("v_cmd", control[:, 0]), "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
-        "tau_r": logs.pop("tau_r", nan), "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
+        "v_ref": ref["v"],
+        "omega_ref": ref["omega"],
+        "e_x": error[:, 0],
+        "e_y": error[:, 1],
+        "e_theta": error[:, 2],
+        "e_tr": np.hypot(error[:, 0], error[:, 1]),
+        "v_cmd": logs.pop("v_cmd", control[:, 0]),
+        "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
+        "tau_r": logs.pop("tau_r", nan),
+        "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
     }
     return columns | logs

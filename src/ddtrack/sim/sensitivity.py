@@ -6,6 +6,7 @@ the controller's own model of the robot under its inner loop, with nu_c held, di
 It lives in ``sim`` because it integrates; the scenario layer hands it to the controller, which sees it only
 through :meth:`NominalPeriod.jacobian`, to which it hands its own command type (so ``sim`` imports no controller).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -34,8 +35,12 @@ class NominalPeriod:
         x = jnp.concatenate([jnp.zeros(3), nu])
         tau, _, _ = self.inner.torque(x, command, self.inner.init(x, None, None))
         tau = self.plant.saturate(tau)
-        end = rk4(lambda z: self.plant.derivative(z, tau, jnp.zeros(2)), self.plant.hold(x, tau),
-                  self.control_period, self.substeps)
+        end = rk4(
+            lambda z: self.plant.derivative(z, tau, jnp.zeros(2)),
+            self.plant.hold(x, tau),
+            self.control_period,
+            self.substeps,
+        )
         return end[:3]
 
     def jacobian(self, nu: Array, nu_c: Array, command_of: Callable[[Array], Any]) -> Array:

@@ -1,4 +1,5 @@
 """The closed-loop simulator: one ``jax.lax.scan`` over control periods (docs/architecture.md, model.md §2.7)."""
+
 from __future__ import annotations
 
 from functools import partial
@@ -13,7 +14,6 @@ from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..trajectories import Trajectory
 from .integrators import rk4
 from .result import SimResult
-
 
 SCAN_UNROLL = 4
 
@@ -38,8 +38,17 @@ class Draws(NamedTuple):
         return Draws(jnp.zeros((n_steps, 2)), jnp.zeros((n_steps, 5)), jax.random.PRNGKey(0))
 
 
-def plant_period(plant: Plant, x: Array, u: Array, t: Array, xi_disturbance: Array, *,
-                 disturbance: WheelDisturbance, control_period: float, substeps: int) -> tuple[Array, Array]:
+def plant_period(
+    plant: Plant,
+    x: Array,
+    u: Array,
+    t: Array,
+    xi_disturbance: Array,
+    *,
+    disturbance: WheelDisturbance,
+    control_period: float,
+    substeps: int,
+) -> tuple[Array, Array]:
     """Advance the plant over one control period under the held input: the simulator's own step.
 
     ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``substeps`` RK4 steps of
@@ -67,8 +76,9 @@ def plant_period(plant: Plant, x: Array, u: Array, t: Array, xi_disturbance: Arr
     return u, x_next
 
 
-def period_status(x: Array, x_next: Array, u: Array, error: Array, *, divergence_error: float = 50.0,
-                  divergence_speed: float = 50.0) -> Array:
+def period_status(
+    x: Array, x_next: Array, u: Array, error: Array, *, divergence_error: float = 50.0, divergence_speed: float = 50.0
+) -> Array:
     """The status of one control period (``STATUS_NAMES``): 2 (``non_finite``) when x_{k+1} or the held input
     is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds
     ``divergence_error`` [m] or |v| [m/s] or |omega| [rad/s] of x_k exceeds ``divergence_speed``, else 0 (``ok``).
@@ -81,10 +91,21 @@ def period_status(x: Array, x_next: Array, u: Array, error: Array, *, divergence
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, draws: Draws, *,
-             n_steps: int, control_period: float = 0.01, substeps: int = 10,
-             disturbance: WheelDisturbance = WheelDisturbance(), noise: MeasurementNoise = MeasurementNoise(),
-             divergence_error: float = 50.0, divergence_speed: float = 50.0) -> SimResult:
+def simulate(
+    plant: Plant,
+    controller: Any,
+    trajectory: Trajectory,
+    x0: Array,
+    draws: Draws,
+    *,
+    n_steps: int,
+    control_period: float = 0.01,
+    substeps: int = 10,
+    disturbance: WheelDisturbance = WheelDisturbance(),
+    noise: MeasurementNoise = MeasurementNoise(),
+    divergence_error: float = 50.0,
+    divergence_speed: float = 50.0,
+) -> SimResult:
     """Simulate ``n_steps`` control periods of ``controller`` on ``plant`` tracking ``trajectory``.
 
     One control period, exactly::
@@ -133,13 +154,17 @@ def simulate(plant: Plant, controller: Any, trajectory: Trajectory, x0: Array, d
         ref = trajectory(t)
         y = noise.measure(x, xi_noise)
         u, next_memory, logs = controller.step(t, y, ref, memory)
-        u, x_next = plant_period(plant, x, u, t, xi_disturbance, disturbance=disturbance,
-                                 control_period=control_period, substeps=substeps)
+        u, x_next = plant_period(
+            plant, x, u, t, xi_disturbance, disturbance=disturbance, control_period=control_period, substeps=substeps
+        )
         error = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
 
         running = status == 0
-        new_status = jnp.where(running, period_status(x, x_next, u, error, divergence_error=divergence_error,
-                                                      divergence_speed=divergence_speed), status)
+        new_status = jnp.where(
+            running,
+            period_status(x, x_next, u, error, divergence_error=divergence_error, divergence_speed=divergence_speed),
+            status,
+        )
         failure_index = jnp.where(running & (new_status != 0), k, failure_index)
         keep = new_status == 0
         x_next = jnp.where(keep, x_next, x)

@@ -1,10 +1,21 @@
 """Reference trajectories: pure functions of time returning a :class:`Reference` (model.md §2.1, 4.2, 4.3)."""
+
 from .base import ParametricCurve, Reference, Trajectory
 from .curves import Circle, FigureEight, Line, Sinusoid
 from .paths import PiecewisePath, polyline_path, square
 from .sampled import SampledTrajectory, unicycle_reference
 
 __all__ = [
-    "Circle", "FigureEight", "Line", "ParametricCurve", "PiecewisePath", "Reference", "SampledTrajectory", "Sinusoid",
-    "Trajectory", "polyline_path", "square", "unicycle_reference",
+    "Circle",
+    "FigureEight",
+    "Line",
+    "ParametricCurve",
+    "PiecewisePath",
+    "Reference",
+    "SampledTrajectory",
+    "Sinusoid",
+    "Trajectory",
+    "polyline_path",
+    "square",
+    "unicycle_reference",
 ]

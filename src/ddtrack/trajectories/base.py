@@ -1,4 +1,5 @@
 """The reference signal and the trajectory protocol (model.md §2.1)."""
+
 from __future__ import annotations
 
 from typing import NamedTuple, Protocol

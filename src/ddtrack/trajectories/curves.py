@@ -1,4 +1,5 @@
 """Smooth references: line, circle, figure-eight, sinusoid (model.md §4.2)."""
+
 from __future__ import annotations
 
 import jax.numpy as jnp

@@ -4,6 +4,7 @@ and waypoint lists with rounded corners.
 Sharp corners (radius 0) give a heading jump with omega_r = 0 there: the jump is not represented
 as an impulse, which is how tracking of "non-continuous gradient" references is usually posed.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,8 +53,9 @@ class PiecewisePath:
         return Reference(p[0], p[1], wrap_angle(turned), v, kappa * v, zero, zero)
 
 
-def polyline_path(points: Sequence[Sequence[float]], *, speed: float, corner_radius: float = 0.0,
-                  loop: bool = False) -> PiecewisePath:
+def polyline_path(
+    points: Sequence[Sequence[float]], *, speed: float, corner_radius: float = 0.0, loop: bool = False
+) -> PiecewisePath:
     """Path through ``points`` (n >= 2, [m]) with every interior corner rounded by a circular fillet.
 
     Raises
@@ -87,8 +89,10 @@ def polyline_path(points: Sequence[Sequence[float]], *, speed: float, corner_rad
     trim[:-1, 1] = tangents
     if np.any(trim.sum(axis=1) > leg_lengths + 1e-12):
         k = int(np.flatnonzero(trim.sum(axis=1) > leg_lengths + 1e-12)[0])
-        raise ValueError(f"corner radius {corner_radius} m does not fit on leg {k} "
-                         f"({leg_lengths[k]:.3g} m long); use a smaller radius")
+        raise ValueError(
+            f"corner radius {corner_radius} m does not fit on leg {k} "
+            f"({leg_lengths[k]:.3g} m long); use a smaller radius"
+        )
     starts, headings, curvatures, lengths = [], [], [], []
     for k, (direction, leg_length) in enumerate(zip(directions, leg_lengths, strict=True)):
         unit = np.array([math.cos(direction), math.sin(direction)])
@@ -105,13 +109,19 @@ def polyline_path(points: Sequence[Sequence[float]], *, speed: float, corner_rad
             lengths.append(corner_radius * abs(turns[k]))
     offsets = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
     return PiecewisePath(
-        starts=jnp.asarray(np.array(starts)), headings=jnp.asarray(headings), curvatures=jnp.asarray(curvatures),
-        offsets=jnp.asarray(offsets), length=float(np.sum(lengths)), speed=float(speed), loop=loop,
+        starts=jnp.asarray(np.array(starts)),
+        headings=jnp.asarray(headings),
+        curvatures=jnp.asarray(curvatures),
+        offsets=jnp.asarray(offsets),
+        length=float(np.sum(lengths)),
+        speed=float(speed),
+        loop=loop,
     )
 
 
-def square(*, corner: Sequence[float] = (10.0, 0.0), side: float = 10.0, speed: float = 0.5,
-           corner_radius: float = 0.0) -> PiecewisePath:
+def square(
+    *, corner: Sequence[float] = (10.0, 0.0), side: float = 10.0, speed: float = 0.5, corner_radius: float = 0.0
+) -> PiecewisePath:
     """The paper's square (model.md §4.3): corners C0 = corner, C0 + (S, 0), C0 + (S, S), C0 + (0, S),
     counter-clockwise from C0 with heading 0, repeating every lap of 4S/v_r (sharp corners).
 

@@ -1,4 +1,5 @@
 """A reference tabulated at a fixed time step, for references without a closed-form pose."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -25,9 +26,15 @@ class SampledTrajectory:
         return Reference(*self.table[i])
 
 
-def unicycle_reference(speed: Callable[[Array], Array], yaw_rate: Callable[[Array], Array], *, duration: float,
-                       step: float, substeps: int = 10, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
-                       ) -> SampledTrajectory:
+def unicycle_reference(
+    speed: Callable[[Array], Array],
+    yaw_rate: Callable[[Array], Array],
+    *,
+    duration: float,
+    step: float,
+    substeps: int = 10,
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> SampledTrajectory:
     """The virtual unicycle q_r' = S(q_r) (v_r(t), omega_r(t)) (model.md §2.1) from ``pose`` at t = 0,
     integrated by RK4 with ``substeps`` per ``step`` and tabulated every ``step`` [s]."""
     n = round(duration / step) + 1

@@ -1,4 +1,5 @@
 """Baseline controllers on the same plant and inner loops as the paper's (issue 5), one module each."""
+
 from .adaptive import AdaptiveComputedTorque, regressor
 from .ltv_lqr import LTVUnicycleLQR, lqr_gain, solve_dare, unicycle_error_model
 from .mppi import MPPI, MPPICost, MPPIMemory, preview, rollout
@@ -6,8 +7,20 @@ from .pure_pursuit import RegulatedPurePursuit, find_carrot, pursuit_curvature
 from .sliding_mode import SlidingModeTorque, switching_term
 
 __all__ = [
-    "AdaptiveComputedTorque", "regressor",
-    "MPPI", "MPPICost", "MPPIMemory", "preview", "rollout",
-    "RegulatedPurePursuit", "find_carrot", "pursuit_curvature",
-    "LTVUnicycleLQR", "SlidingModeTorque", "lqr_gain", "solve_dare", "switching_term", "unicycle_error_model",
+    "MPPI",
+    "AdaptiveComputedTorque",
+    "LTVUnicycleLQR",
+    "MPPICost",
+    "MPPIMemory",
+    "RegulatedPurePursuit",
+    "SlidingModeTorque",
+    "find_carrot",
+    "lqr_gain",
+    "preview",
+    "pursuit_curvature",
+    "regressor",
+    "rollout",
+    "solve_dare",
+    "switching_term",
+    "unicycle_error_model",
 ]

@@ -44,6 +44,7 @@ projection, Ioannou & Sun, "Robust Adaptive Control", 1996)::
 The update pauses in a period where the torque limit acts: the applied torque is then not the law's,
 and the error equation behind the update does not hold.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -62,8 +63,12 @@ def regressor(nominal: RobotParams, nu: Array, nu_c: Array, nu_c_dot: Array) -> 
     d, r, half = nominal.com_offset, nominal.wheel_radius, nominal.half_axle
     w = nu[1]
     zero = jnp.zeros_like(w)
-    return jnp.array([[nu_c_dot[0] - d * w * nu_c[1], zero, 2.0 * nu_c[0] / r**2],
-                      [d**2 * nu_c_dot[1] + d * w * nu_c[0], nu_c_dot[1], 2.0 * half**2 * nu_c[1] / r**2]])
+    return jnp.array(
+        [
+            [nu_c_dot[0] - d * w * nu_c[1], zero, 2.0 * nu_c[0] / r**2],
+            [d**2 * nu_c_dot[1] + d * w * nu_c[0], nu_c_dot[1], 2.0 * half**2 * nu_c[1] / r**2],
+        ]
+    )
 
 
 def nominal_parameters(nominal: RobotParams) -> Array:
@@ -98,12 +103,17 @@ class AdaptiveComputedTorque:
         error = nu - command.nu_c
         y_matrix = regressor(self.nominal, nu, command.nu_c, command.nu_c_dot)
         damping = reduced_mass(self.nominal) @ (jnp.asarray(self.kc) * error)
-        coulomb = self.nominal.coulomb_friction * jnp.tanh(wheel_speeds(self.nominal, nu) / self.nominal.friction_smoothing)
+        coulomb = self.nominal.coulomb_friction * jnp.tanh(
+            wheel_speeds(self.nominal, nu) / self.nominal.friction_smoothing
+        )
         tau = reduced_input_inverse(self.nominal) @ (y_matrix @ memory - damping + command.feedback) + coulomb
         limit = self.nominal.max_torque
         saturated = jnp.any(jnp.abs(tau) > limit).astype(tau.dtype)
-        updated = jnp.clip(memory - self.control_period * jnp.asarray(self.gamma) * (y_matrix.T @ error),
-                           jnp.asarray(self.lower), jnp.asarray(self.upper))
+        updated = jnp.clip(
+            memory - self.control_period * jnp.asarray(self.gamma) * (y_matrix.T @ error),
+            jnp.asarray(self.lower),
+            jnp.asarray(self.upper),
+        )
         # a saturated torque is not the law's: the error equation behind the update does not hold
         memory = jnp.where(saturated > 0.0, memory, updated)
         return jnp.clip(tau, -limit, limit), saturated, memory

@@ -21,6 +21,7 @@ doubling falls like rho^(2^k), rho the closed-loop spectral radius: 20 steps rea
 (relative 1e-13) at v_l = 1e-4 m/s and T_c = 10 ms, the slowest case; each tenfold shorter T_c or
 smaller ``min_velocity`` costs about 3.3 more.
 """
+
 from __future__ import annotations
 
 import jax
@@ -55,6 +56,7 @@ def solve_dare(a: Array, b: Array, q: Array, r: Array, iterations: int) -> Array
     A_{k+1} = A_k W^-1 A_k,  G_{k+1} = G_k + A_k W^-1 G_k A_k',  H_{k+1} = H_k + A_k' H_k W^-1 A_k;
     H_k -> P quadratically for a stabilisable, detectable pair.
     """
+
     def double(_, carry):
         a_k, g_k, h_k = carry
         w = jnp.eye(a.shape[0]) + g_k @ h_k
@@ -119,5 +121,8 @@ class LTVUnicycleLQR:
     def step(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[Array, tuple[()], Logs]:
         """As a whole controller of a kinematic plant: the clamped command."""
         command, memory, _ = self.command(t, y, ref, memory)
-        return command.nu_c, memory, {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1],
-                                      "saturated": command.saturated}
+        return (
+            command.nu_c,
+            memory,
+            {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated},
+        )

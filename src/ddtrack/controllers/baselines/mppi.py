@@ -28,6 +28,7 @@ critic): torques alone would otherwise race the robot at 10 m/s towards a refere
 We leave out the lambda u^T Sigma^-1 eps term of Williams et al.'s cost: the effort weight r already
 penalises large torques, and without it a zero-noise sample's cost is that of the previous plan.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -94,8 +95,12 @@ class MPPICost:
         velocity = squared_norm(states[:, 3:5] - reference[:, 3:5])
         tracking = self.position * position + self.heading * heading
         excess = jax.nn.relu(jnp.abs(states[:, 3:5]) - jnp.stack([self.max_velocity, self.max_yaw_rate]))
-        stage = (tracking + self.velocity * velocity + self.effort * squared_norm(torques)
-                 + self.limit * squared_norm(excess))
+        stage = (
+            tracking
+            + self.velocity * velocity
+            + self.effort * squared_norm(torques)
+            + self.limit * squared_norm(excess)
+        )
         return total(stage) + self.terminal * tracking[-1]
 
 
@@ -153,8 +158,9 @@ class MPPI:
         tau = sequence[0]
         # the plan T_c later: element i now starts at i dt + T_c (linear in between, the last one held)
         index = jnp.arange(self.horizon, dtype=float)
-        shifted = jax.vmap(lambda u: jnp.interp(index + self.control_period / self.model_step, index, u),
-                           in_axes=1, out_axes=1)(sequence)
+        shifted = jax.vmap(
+            lambda u: jnp.interp(index + self.control_period / self.model_step, index, u), in_axes=1, out_axes=1
+        )(sequence)
         saturated = (clipped >= 0.5).astype(tau.dtype)  # the plan presses against the limit
         logs = {"v_cmd": states[0, 3], "omega_cmd": states[0, 4], "mppi_cost": cost, "saturated": saturated}
         return tau, MPPIMemory(shifted, key), logs

@@ -50,6 +50,7 @@ analytic derivative, and a backward difference over one period spikes whenever t
 square corner, entering or leaving the rotation in place), the reason model.md §2.5 prefers analytic rates.
 On a line or a circle at constant speed the true derivative is 0 anyway.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -65,7 +66,10 @@ from ..base import Logs, VelocityCommand
 
 
 def lookahead_distance(speed: Array, lookahead_time: Array, min_lookahead: Array, max_lookahead: Array) -> Array:
-    """Adaptive lookahead L = clip(|v| l_t, L_min, L_max) [m] (Macenski et al. 2023; Nav2's velocity-scaled lookahead)."""
+    """Adaptive lookahead L = clip(|v| l_t, L_min, L_max) [m].
+
+    As in Macenski et al. 2023 (Nav2's velocity-scaled lookahead).
+    """
     return jnp.clip(jnp.abs(speed) * lookahead_time, min_lookahead, max_lookahead)
 
 
@@ -96,7 +100,9 @@ def pursuit_curvature(carrot: Array, pose: Array) -> tuple[Array, Array]:
     dx, dy = carrot[0] - pose[0], carrot[1] - pose[1]
     x_c, y_c = c * dx + s * dy, -s * dx + c * dy
     distance2 = x_c**2 + y_c**2
-    kappa = jnp.where(distance2 > 1e-18, 2.0 * y_c / jnp.maximum(distance2, 1e-18), 0.0)  # robot on the carrot: go straight
+    kappa = jnp.where(
+        distance2 > 1e-18, 2.0 * y_c / jnp.maximum(distance2, 1e-18), 0.0
+    )  # robot on the carrot: go straight
     return kappa, jnp.arctan2(y_c, x_c)
 
 
@@ -154,8 +160,9 @@ class RegulatedPurePursuit:
         steps = jnp.hypot(jnp.diff(samples.x), jnp.diff(samples.y))
         approaching = (samples.v[-1] <= 0.0) & (jnp.sum(steps) < self.approach_distance)
         to_goal = jnp.hypot(samples.x[-1] - y[0], samples.y[-1] - y[1])
-        v = jnp.where(approaching, jnp.minimum(v, jnp.maximum(v * to_goal / self.approach_distance,
-                                                               self.min_approach_speed)), v)
+        v = jnp.where(
+            approaching, jnp.minimum(v, jnp.maximum(v * to_goal / self.approach_distance, self.min_approach_speed)), v
+        )
         yaw_limited = v * jnp.abs(kappa) > self.max_yaw_rate
         v = jnp.where(yaw_limited, self.max_yaw_rate / jnp.maximum(jnp.abs(kappa), 1e-300), v)
         omega = v * kappa

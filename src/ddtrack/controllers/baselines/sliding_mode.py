@@ -22,6 +22,7 @@ The sliding surface is s = nu_c - nu, not s = e + lambda * integral(e): the velo
 one (tau appears in s_dot), so s itself is a valid sliding variable, and an integral would need memory
 and anti-windup under the torque limit.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
