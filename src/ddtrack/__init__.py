@@ -13,15 +13,17 @@ Quick start::
 """
 
 from importlib import import_module as _import_module
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from ._after_import import after_import as _after_import
 
 
-def _enable_float64(jax) -> None:
+def _enable_float64(jax: ModuleType) -> None:
     jax.config.update("jax_enable_x64", True)  # float64 everywhere: set before any array exists
 
 
-def _register_env(gymnasium) -> None:
+def _register_env(gymnasium: ModuleType) -> None:
     from .envs import register_envs  # one place registers ddtrack/DiffDriveTracking-v0
 
     register_envs()
@@ -29,6 +31,25 @@ def _register_env(gymnasium) -> None:
 
 _after_import("jax", _enable_float64)
 _after_import("gymnasium", _register_env)
+
+if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time they load on first use
+    from .errors import ConfigError as ConfigError
+    from .errors import DdtrackError as DdtrackError
+    from .errors import RunError as RunError
+    from .metrics import improvement as improvement
+    from .metrics import summarize as summarize
+    from .metrics import tracking_error as tracking_error
+    from .runner import monte_carlo as monte_carlo
+    from .runner import prepare as prepare
+    from .runner import run as run
+    from .runner import run_batch as run_batch
+    from .scenario import Scenario as Scenario
+    from .scenario import load_scenario as load_scenario
+    from .scenario import validate_scenario as validate_scenario
+    from .sim import Draws as Draws
+    from .sim import SimResult as SimResult
+    from .sim import simulate as simulate
+    from .sim import timeseries as timeseries
 
 __version__ = "0.1.0"
 
@@ -55,7 +76,7 @@ _SOURCES = {
 __all__ = sorted(_SOURCES)  # noqa: PLE0605 (the lazy-import table above is the one list of public names)
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name not in _SOURCES:
         raise AttributeError(f"module 'ddtrack' has no attribute '{name}'")
     value = getattr(_import_module(f".{_SOURCES[name]}", __name__), name)

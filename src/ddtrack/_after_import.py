@@ -5,8 +5,9 @@ yet JAX still runs in float64 and Gymnasium still knows ``ddtrack/DiffDriveTrack
 from __future__ import annotations
 
 import importlib.abc
+import importlib.machinery
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from types import ModuleType
 
 
@@ -17,7 +18,9 @@ class _AfterImport(importlib.abc.MetaPathFinder):
     def __init__(self) -> None:
         self.waiting: dict[str, list[Callable[[ModuleType], None]]] = {}
 
-    def find_spec(self, name, path, target=None):
+    def find_spec(
+        self, name: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
         if name not in self.waiting:
             return None
         for finder in sys.meta_path:
@@ -28,17 +31,18 @@ class _AfterImport(importlib.abc.MetaPathFinder):
                 break
         else:
             return None
-        if not hasattr(spec.loader, "exec_module"):  # a namespace package or a legacy loader: leave it alone
+        loader = spec.loader
+        if loader is None or not hasattr(loader, "exec_module"):  # a namespace package or a legacy loader
             return spec
         actions = self.waiting.pop(name)
-        run_module = spec.loader.exec_module
+        run_module = loader.exec_module
 
         def exec_module(module: ModuleType) -> None:
             run_module(module)
             for action in actions:
                 action(module)
 
-        spec.loader.exec_module = exec_module  # this spec's own loader object: nothing shared is changed
+        loader.exec_module = exec_module  # type: ignore[method-assign]  # this spec's own loader: nothing shared changes
         return spec
 
 

@@ -17,9 +17,10 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -27,6 +28,8 @@ matplotlib.use("Agg")  # headless by default, as in plotting
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.animation import FFMpegWriter, PillowWriter
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
@@ -219,7 +222,7 @@ def _figure_size(aspect: float, with_gains: bool, dpi: float) -> tuple[float, fl
     """Width and height [in]: 6.4 wide for the map alone, its height following the map's aspect (height / width)
     within limits; 10.8 x 5.6 with the gains panel. Whole pixels, an even number of them (as H.264 needs)."""
     width, height = (10.8, 5.6) if with_gains else (6.4, 1.4 + 4.6 * min(max(aspect, 0.45), 1.2))
-    return tuple(2 * round(size * dpi / 2) / dpi for size in (width, height))
+    return 2 * round(width * dpi / 2) / dpi, 2 * round(height * dpi / 2) / dpi
 
 
 def _emptiest_corner(
@@ -245,7 +248,7 @@ def _emptiest_corner(
 class _Robot:
     """The patches of one footprint, moved by :meth:`place`."""
 
-    def __init__(self, ax, *, half_axle: float, wheel_radius: float, color: str, outline: bool) -> None:
+    def __init__(self, ax: Axes, *, half_axle: float, wheel_radius: float, color: str, outline: bool) -> None:
         self.geometry = {"half_axle": half_axle, "wheel_radius": wheel_radius}
         style = (
             {"fill": False, "ec": color, "lw": 1.0, "ls": "--"}
@@ -253,9 +256,11 @@ class _Robot:
             else {"fc": to_rgba(color, 0.55), "ec": color, "lw": 1.2}
         )
         zero = np.zeros((4, 2))
-        self.body = ax.add_patch(Polygon(zero, closed=True, zorder=4, **style))
+        self.body = Polygon(zero, closed=True, zorder=4, **style)
         wheel_style = style if outline else {"fc": WHEEL, "ec": WHEEL, "lw": 0.8}
-        self.wheels = [ax.add_patch(Polygon(zero, closed=True, zorder=5, **wheel_style)) for _ in range(2)]
+        self.wheels = [Polygon(zero, closed=True, zorder=5, **wheel_style) for _ in range(2)]
+        for patch in (self.body, *self.wheels):
+            ax.add_patch(patch)
         self.arrow = None if outline else ax.add_line(plt.Line2D([], [], color=color, lw=1.6, zorder=6))
         self.tip = None if outline else ax.add_line(plt.Line2D([], [], marker=(3, 0, 0), ms=6, color=color, zorder=6))
 
@@ -264,7 +269,7 @@ class _Robot:
         self.body.set_xy(shape["body"])
         self.wheels[0].set_xy(shape["right_wheel"])
         self.wheels[1].set_xy(shape["left_wheel"])
-        if self.arrow is not None:
+        if self.arrow is not None and self.tip is not None:
             self.arrow.set_data(shape["arrow"][:, 0], shape["arrow"][:, 1])
             self.tip.set_data([shape["arrow"][1, 0]], [shape["arrow"][1, 1]])
             self.tip.set_marker((3, 0, np.degrees(theta) - 90.0))  # a triangle pointing along the heading
@@ -318,7 +323,9 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
         views.append(zoom_ax)
 
     travelled = [view.plot(c["x"][:1], c["y"][:1], color=ROBOT, lw=0.6, alpha=0.35, zorder=2)[0] for view in views]
-    trails = [view.add_collection(LineCollection([], lw=2.2, zorder=3)) for view in views]
+    trails = [LineCollection([], lw=2.2, zorder=3) for _ in views]
+    for view, trail in zip(views, trails, strict=True):
+        view.add_collection(trail)
     ghosts = [
         _Robot(view, half_axle=half_axle, wheel_radius=wheel_radius, color=REFERENCE, outline=True) for view in views
     ]
@@ -358,8 +365,8 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
         colors[:, 3] = np.linspace(0.05, 1.0, len(segments))  # fading towards the past
         for line, trail in zip(travelled, trails, strict=True):
             line.set_data(c["x"][: row + 1], c["y"][: row + 1])
-            trail.set_segments(segments)
-            trail.set_color(colors)
+            trail.set_segments(list(segments))
+            trail.set_color(colors)  # type: ignore[arg-type]  # an (N, 4) RGBA array, as LineCollection documents
         for ghost, robot in zip(ghosts, robots, strict=True):
             ghost.place(c["x_ref"][row], c["y_ref"][row], c["theta_ref"][row])
             robot.place(c["x"][row], c["y"][row], c["theta"][row])
@@ -419,7 +426,7 @@ class _Blitter:
 
     def __init__(self, scene: _Scene) -> None:
         self.scene = scene
-        canvas = scene.fig.canvas
+        canvas = _agg_canvas(scene.fig)
         canvas.draw()  # constrained layout, once
         scene.fig.set_layout_engine("none")  # frozen, so the background stays valid
         for artist in scene.moving:
@@ -429,7 +436,7 @@ class _Blitter:
 
     def frame(self, row: int) -> Image.Image:
         self.scene.draw(row)
-        canvas = self.scene.fig.canvas
+        canvas = _agg_canvas(self.scene.fig)
         canvas.restore_region(self.background)
         for artist in self.scene.moving:
             self.scene.fig.draw_artist(artist)
@@ -437,23 +444,35 @@ class _Blitter:
         return Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
 
 
+def _agg_canvas(fig: Figure) -> FigureCanvasAgg:
+    """The figure's canvas, which blitting needs to be Agg's (or one built on it, as every raster backend is)."""
+    canvas = fig.canvas
+    if not isinstance(canvas, FigureCanvasAgg):
+        raise RuntimeError(f"animations need an Agg-based Matplotlib canvas, not {type(canvas).__name__}")
+    return canvas
+
+
 class _BlitPillowWriter(PillowWriter):
     """:class:`PillowWriter` fed by the blitter instead of a full ``savefig`` per frame, keeping each frame as
     8-bit indices into one palette: a quarter of the memory of RGB frames, and no colour flicker."""
 
     def __init__(self, *, fps: float, palette: Image.Image) -> None:
-        super().__init__(fps=fps)
+        super().__init__(fps=fps)  # type: ignore[arg-type]  # stubs say int; a float frame rate works (ms = 1000 / fps)
         self._palette = palette
         self.image: Image.Image | None = None
+        self._frames: list[Image.Image] = []
 
-    def grab_frame(self, **savefig_kwargs) -> None:
+    def grab_frame(self, **savefig_kwargs: Any) -> None:
+        assert self.image is not None, "render() sets the frame's image before grabbing it"
         self._frames.append(self.image.quantize(palette=self._palette, dither=Image.Dither.NONE))
 
     def finish(self) -> None:
         frames, self._frames = self._frames, []
         frames.reverse()
 
-        def handed_over():  # Pillow copies each frame it encodes: drop ours as it goes, so only one set is held
+        def handed_over() -> Iterator[
+            Image.Image
+        ]:  # Pillow copies each frame it encodes: drop ours as it goes, so only one set is held
             while frames:
                 yield frames.pop()
 
@@ -533,15 +552,15 @@ def animate(
             blitter = _Blitter(scene)
             # the last frame holds every colour the others use (the whole path, the gains)
             palette = blitter.frame(int(rows[-1])).quantize(colors=256, method=Image.Quantize.MEDIANCUT)
-            writer = _BlitPillowWriter(fps=fps, palette=palette)
+            gif = _BlitPillowWriter(fps=fps, palette=palette)
 
             def render(path: Path) -> None:
-                with writer.saving(scene.fig, str(path), dpi):
+                with gif.saving(scene.fig, str(path), dpi):
                     for row in rows:
-                        writer.image = blitter.frame(int(row))
-                        writer.grab_frame()
+                        gif.image = blitter.frame(int(row))
+                        gif.grab_frame()
         else:
-            writer = FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])
+            writer = FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])  # type: ignore[arg-type]  # as above
 
             def render(path: Path) -> None:
                 scene.fig.canvas.draw()

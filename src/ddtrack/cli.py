@@ -11,6 +11,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from types import ModuleType
 
 import click
 
@@ -368,7 +369,7 @@ def tune(
     """Tune a controller's constant gains by gradient descent through whole simulated rollouts of SCENARIO...
     (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
     from .outdir import check_output, staged_folder
-    from .scenario import load_scenario
+    from .scenario import kanayama_gains, load_scenario
     from .tune import TUNABLE, problems, write
     from .tune import tune as run_tuning
 
@@ -381,7 +382,7 @@ def tune(
     specs = [load_scenario(path, overrides=overrides, controller=controller) for path in scenarios]
     check_output(out, command="tune", overwrite=overwrite)
     enable_compilation_cache()
-    initial = specs[0].controller.gains
+    initial = kanayama_gains(specs[0].controller)
     with progress_bar(steps + 1, "tuning") as advance:
         training = problems(specs, range(seeds))
         result = run_tuning(
@@ -614,12 +615,9 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
         task = bar.add_task(label, total=total)
 
         def advance(completed: int, description: str | None = None, total: int | None = None) -> None:
-            bar.update(
-                task,
-                completed=completed,
-                description=description or label,
-                **({} if total is None else {"total": total}),
-            )
+            if total is not None:
+                bar.update(task, total=total)
+            bar.update(task, completed=completed, description=description or label)
 
         yield advance
 
@@ -652,7 +650,7 @@ def enable_compilation_cache() -> None:
     enable()
 
 
-def one_device_per_core(jax) -> None:
+def one_device_per_core(jax: ModuleType) -> None:
     """One JAX CPU device per usable core (called once JAX is imported)."""
     jax.config.update(
         "jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1

@@ -10,6 +10,7 @@ warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,7 @@ GYRATION_RANGE = (0.05, 20.0)
 _SAMPLES: dict[tuple, Any] = {}  # the last few scenarios' samples: loading checks them, runs reuse them
 
 
-def _sampler():
+def _sampler() -> Callable[..., Any]:  # (trajectory, times) -> Reference; this layer sits below both
     import jax
 
     return jax.jit(lambda trajectory, t: jax.vmap(trajectory)(t))  # one program, kept by the persistent cache

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from ._pytree import FloatVector
 from .controllers import Backstepping, Cascade, Dithered, Emulator
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
@@ -163,9 +164,9 @@ def identify(
     epochs: int = 100,
     control_period: float = 0.01,
     substeps: int = 10,
-    dither: Array = (0.05, 0.1),
-    gains: Array = (1.0, 55.0, 15.0),
-    limits: Array = (2.0, 4.0),
+    dither: FloatVector = (0.05, 0.1),
+    gains: FloatVector = (1.0, 55.0, 15.0),
+    limits: FloatVector = (2.0, 4.0),
     learning_rate: float = 0.2,
     momentum: float = 0.3,
     clip_norm: float = 5.0,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 
 import pyarrow as pa
@@ -55,7 +56,7 @@ def run_specs(
     """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.runner.monte_carlo`)."""
     seeds = list(range(seed, seed + n))
     return {
-        name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=lambda done, name=name: on_chunk(name, done))
+        name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=partial(on_chunk, name))
         for name, spec in specs.items()
     }
 
@@ -133,9 +134,11 @@ def format_summary(summary: dict, n: int) -> str:
         else:
             text = f"{with_interval(e['mean'], e['ci_low'], e['ci_high'])} m"
         saturated = stats["saturation_fraction"]
-        scaled = [None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")]
+        mean, low, high = (
+            None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")
+        )
         lines.append(
-            f"  {name:<26} e_tr_mean {text}; saturated {with_interval(*scaled)} %; failures {stats['failures']}"
+            f"  {name:<26} e_tr_mean {text}; saturated {with_interval(mean, low, high)} %; failures {stats['failures']}"
         )
         if stats["warnings"]:
             lines.append(

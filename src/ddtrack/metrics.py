@@ -146,7 +146,9 @@ def _check_domain(values: np.ndarray, domain: str) -> None:
         raise ValueError(f"values outside the domain '{domain}' {list(bounds)}: {values.min()} .. {values.max()}")
 
 
-def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
+def pooled_improvement(
+    baselines: Sequence[float | None], candidates: Sequence[float | None], confidence: float = 0.95
+) -> dict:
     """Paired improvement of the pooled mean error, 100 (1 - sum(candidates) / sum(baselines)), with a delta-method
     confidence interval of the ratio over the pairs (on log(ratio), so it never passes 100 %); same keys as
     :func:`mean_ci`.
@@ -157,7 +159,13 @@ def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
     from scipy import stats
 
     pairs = [(b, c) for b, c in zip(baselines, candidates, strict=True) if b is not None and c is not None]
-    summary = {"mean": None, "ci_low": None, "ci_high": None, "n": len(pairs), "missing": len(baselines) - len(pairs)}
+    summary: dict[str, float | int | None] = {
+        "mean": None,
+        "ci_low": None,
+        "ci_high": None,
+        "n": len(pairs),
+        "missing": len(baselines) - len(pairs),
+    }
     if not pairs or not sum(b for b, _ in pairs) > 0.0:
         return summary
     base, cand = np.asarray(pairs, dtype=float).T
@@ -171,7 +179,7 @@ def pooled_improvement(baselines, candidates, confidence: float = 0.95) -> dict:
     return summary
 
 
-def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
+def mean_ci(values: Sequence[float | None], confidence: float = 0.95, domain: str = "real") -> dict:
     """Mean and a two-sided confidence interval of the mean over independent values (seeds), inside ``domain``.
 
     ``domain`` is the range the values can take (:data:`METRIC_DOMAINS` maps each statistic to its own):
@@ -188,19 +196,19 @@ def mean_ci(values, confidence: float = 0.95, domain: str = "real") -> dict:
 
     present = np.asarray([v for v in values if v is not None], dtype=float)
     _check_domain(present, domain)
-    summary = {
+    summary: dict[str, float | int | None] = {
         "mean": None,
         "ci_low": None,
         "ci_high": None,
         "n": int(present.size),
         "missing": len(values) - int(present.size),
     }
-    if present.size:
-        summary["mean"] = float(np.mean(present))
-    if present.size >= 2:
+    mean = float(np.mean(present)) if present.size else None
+    summary["mean"] = mean
+    if mean is not None and present.size >= 2:
         se = float(np.std(present, ddof=1) / np.sqrt(present.size))
         quantile = float(stats.t.ppf(0.5 + confidence / 2, present.size - 1))
-        low, high = _interval(summary["mean"], se, quantile, domain)
+        low, high = _interval(mean, se, quantile, domain)
         summary |= {"ci_low": low, "ci_high": high}
     return summary
 

@@ -33,7 +33,7 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+def atomic_write(path: Path, write: Callable[[IO[bytes]], object]) -> None:
     """Write ``path`` through ``write(file)`` on a temporary sibling, then rename it into place.
 
     A write that fails midway (a full disk, a folder that went read-only) removes its temporary and

@@ -37,22 +37,27 @@ def _fixed_margins(fig: Figure, gap: float = PANEL_GAP) -> None:
     )
 
 
-def _axes(ax: Axes | None, **figure) -> tuple[Figure, Axes]:
+def root_figure(ax: Axes) -> Figure:
+    """The top-level figure holding ``ax`` (the one to save), also when ``ax`` sits in a subfigure."""
+    return ax.figure.figure  # a Figure's .figure is itself, a SubFigure's is its root
+
+
+def _axes(ax: Axes | None, *, figsize: tuple[float, float]) -> tuple[Figure, Axes]:
     if ax is None:
-        fig, ax = plt.subplots(**figure)
+        fig, ax = plt.subplots(figsize=figsize)
         _fixed_margins(fig)
         return fig, ax
-    return ax.figure, ax
+    return root_figure(ax), ax
 
 
 def _stack(axes: Sequence[Axes] | None, n: int, title: str = "") -> tuple[Figure, Sequence[Axes]]:
     if axes is None:
-        fig, axes = plt.subplots(n, 1, sharex=True, figsize=(7, 1.9 * n + 0.6))
+        fig, grid = plt.subplots(n, 1, sharex=True, figsize=(7, 1.9 * n + 0.6), squeeze=False)
         _fixed_margins(fig)
         if title:
             fig.suptitle(title, fontsize=11, y=1 - 0.12 / fig.get_size_inches()[1], va="top")
-        return fig, list(np.atleast_1d(axes))
-    return axes[0].figure, axes
+        return fig, list(grid[:, 0])
+    return root_figure(axes[0]), axes
 
 
 def _legend_above(ax: Axes, columns: int = 4) -> None:

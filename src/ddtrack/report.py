@@ -39,7 +39,7 @@ from ._format import significant
 from .errors import RunError
 from .metrics import improvement
 from .outdir import atomic_write, check_writable
-from .plotting import ADAPTIVE, ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt
+from .plotting import ADAPTIVE, ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt, root_figure
 from .sim import REMEDIES
 
 #: folder kind -> the files that identify it (all must be present); checked in this order
@@ -311,7 +311,10 @@ def svg(fig: plt.Figure, name: str, label: str) -> Markup:
     text = re.sub(r"<!--.*?-->", "", text, flags=re.S)  # matplotlib's comments repeat the text it draws
     text = re.sub(r"<[^<>]+>", lambda tag: _prefix_ids(tag.group(0), name), text)  # tags only: text stays as drawn
     head_end = text.index(">")
-    width = float(re.search(r'\swidth="([0-9.]+)pt"', text[:head_end]).group(1)) * 4 / 3  # [px] CSS: 96 px per 72 pt
+    size = re.search(r'\swidth="([0-9.]+)pt"', text[:head_end])
+    if size is None:
+        raise ValueError("matplotlib's SVG has no width in pt")  # our own figure: a programming error, not input
+    width = float(size.group(1)) * 4 / 3  # [px] CSS: 96 px per 72 pt
     head = re.sub(r'\s(width|height)="[^"]*"', "", text[:head_end])  # the page sizes it; the viewBox keeps its shape
     return (
         Markup(head)
@@ -352,7 +355,7 @@ def plot_distributions(
     if ax is None:
         fig, ax = plt.subplots(figsize=(max(4.5, 0.9 * len(groups) + 2.0), 3.8), layout="constrained")
     else:
-        fig = ax.figure
+        fig = root_figure(ax)
     names = list(groups)
     data = [np.asarray([v for v in groups[name] if v is not None and math.isfinite(v)], dtype=float) for name in names]
     positions = np.arange(1, len(names) + 1)
@@ -705,7 +708,7 @@ def _reproduce_page(folder: Path) -> dict:
                 tables=(Table("gains-table", ("case", "controller", "seed", *GAIN_NAMES), tuple(gain_rows), left=2),),
             )
         )
-    images = []
+    images: list[Figure] = []
     files = sorted((folder / "figures").glob("*.png"), key=_figure_order) if (folder / "figures").is_dir() else []
     for file in files:
         markup = png(file, file.stem)
@@ -823,7 +826,7 @@ def _mc_page(folder: Path) -> dict:
     by_controller: dict[str, list[dict]] = {str(name): [] for name in controllers}
     for row in runs:
         by_controller.setdefault(str(row["controller"]), []).append(row)
-    rows = tuple(
+    rows: tuple[tuple[str | Cell, ...], ...] = tuple(
         (
             str(name),
             fmt(len(by_controller[str(name)])),
@@ -1023,7 +1026,7 @@ def _bench_page(folder: Path) -> dict:
     references = sorted(
         {key.removeprefix("improvement_over_") for e in board for key in e if key.startswith("improvement_over_")}
     )
-    rows = tuple(
+    rows: tuple[tuple[str | Cell, ...], ...] = tuple(
         (
             str(rank),
             str(e["controller"]),
@@ -1076,13 +1079,13 @@ def _bench_page(folder: Path) -> dict:
     trajectories = sorted({str(r["label.trajectory"]) for r in ok})
     if trajectories:
         columns = len(trajectories) if len(controllers) * len(trajectories) <= 16 else min(3, len(trajectories))
-        rows = -(-len(trajectories) // columns)  # many controllers: panels wrap, three to a row, to stay readable
+        panel_rows = -(-len(trajectories) // columns)  # many controllers: panels wrap, three to a row, to stay readable
         fig, axes = plt.subplots(
-            rows,
+            panel_rows,
             columns,
             squeeze=False,
             layout="constrained",
-            figsize=(min(12.5, max(3.6, 0.4 * len(controllers) + 1.4) * columns), 3.4 * rows + 1.0),
+            figsize=(min(12.5, max(3.6, 0.4 * len(controllers) + 1.4) * columns), 3.4 * panel_rows + 1.0),
         )
         for i, (ax, trajectory) in enumerate(zip(axes.flat, trajectories, strict=False)):
             plot_distributions(
@@ -1246,6 +1249,7 @@ def _robustness_figure(results: list[dict], controllers: Sequence[str]) -> plt.F
         ax.set_ylabel("mass ×", fontsize=8)
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
+    assert image is not None, "a robustness map has at least one controller"
     fig.colorbar(image, ax=axes, label="mean e_tr [m]")
     return fig
 

@@ -15,6 +15,7 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -185,7 +186,7 @@ def table_csv(table: dict) -> str:
 def case_figures(name: str, case: CaseResult) -> dict[str, plt.Figure]:
     """The paper's Figs. 10-13 (line) or 14-17 (square): path, states, deviations, gains (seed 0)."""
     bs, nn = case.series["backstepping"], case.series["nn_adaptive"]
-    window = tuple(case.scenario.simulation.window)
+    window = case.scenario.simulation.window
     path = plot_path(bs, label="backstepping", title=CASES[name])
     plot_path(nn, ax=path.axes[0], label="NN-adaptive", color=ADAPTIVE, reference=False)
     path.axes[0].legend(loc="best", fontsize=8)
@@ -220,7 +221,7 @@ def reproduce(
     }
     for name, case in cases.items():
         for file, fig in case_figures(name, case).items():
-            atomic_write(out / "figures" / file, lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
+            atomic_write(out / "figures" / file, partial(fig.savefig, format="png", dpi=110))
             plt.close(fig)
     table["elapsed_s"] = time.perf_counter() - start
     atomic_write(out / "table1.json", lambda f: f.write((json.dumps(table, indent=2, allow_nan=False) + "\n").encode()))

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import IO
 
 import matplotlib.pyplot as plt
 import numpy as np
+import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 import tomli_w
@@ -22,7 +24,7 @@ from .plotting import plot_errors, plot_gains, plot_path, plot_states, plot_torq
 from .scenario import Scenario, to_toml_dict
 
 
-def float64_array(values) -> pa.Array:
+def float64_array(values: npt.ArrayLike) -> pa.Array:
     """A float64 Arrow array over the values' buffer.
 
     ``pa.array`` would import pandas (0.25 s) only to check whether the values are a Series.
@@ -43,7 +45,7 @@ def write_run(
     folder = Path(folder)
     written = []
 
-    def put(name: str, write: Callable[[IO[bytes]], None]) -> None:
+    def put(name: str, write: Callable[[IO[bytes]], object]) -> None:
         atomic_write(folder / name, write)
         written.append(folder / name)
 
@@ -68,6 +70,6 @@ def write_run(
     if any(name in columns and np.ptp(columns[name]) > 0 for name in ("kx", "ky", "ktheta")):
         figures["gains.png"] = plot_gains(columns, title=title)  # gains that moved (the paper's Figs. 13 and 17)
     for name, fig in figures.items():
-        put(f"figures/{name}", lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
+        put(f"figures/{name}", partial(fig.savefig, format="png", dpi=110))
         plt.close(fig)
     return written

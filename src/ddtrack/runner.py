@@ -12,6 +12,7 @@ import os
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
+from typing import TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -21,11 +22,15 @@ from jax import Array
 from . import feasibility
 from ._format import significant
 from .adaptation import adaptation_warnings
+from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
 from .metrics import summarize, tracking_error
-from .model import RobotParams, traction
+from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance, traction
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, vmap_runs
+from .trajectories import Trajectory
+
+Batched = TypeVar("Batched")
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
 
@@ -70,6 +75,7 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
         r = jax.random.truncated_normal(key, -3.0, 3.0)
     if draw.relative is not None:
         return float(value * (1.0 + draw.relative * r))
+    assert draw.absolute is not None  # ParameterDraw's validator requires exactly one of the two
     return float(value + draw.absolute * r)
 
 
@@ -147,11 +153,19 @@ def with_identification(
     return dataclasses.replace(setup, controller=controller, identification=result)
 
 
-def _identifier(scenario: Scenario):
+def _identifier(scenario: Scenario) -> Callable[..., Identification]:
     """identify(plant, inner, emulator, key, disturbance, noise) with the scenario's settings bound."""
     config, sim = scenario.controller, scenario.simulation
+    assert isinstance(config, NNAdaptiveConfig), "only the NN-adaptive controller identifies its plant"
 
-    def run_identification(plant, inner, emulator, key, disturbance, noise):
+    def run_identification(
+        plant: RobotParams,
+        inner: TorqueLaw,
+        emulator: Emulator,
+        key: Array,
+        disturbance: WheelDisturbance,
+        noise: MeasurementNoise,
+    ) -> Identification:
         return identify(
             plant,
             inner,
@@ -175,7 +189,7 @@ def _identifier(scenario: Scenario):
     return run_identification
 
 
-def shard_runs(tree):
+def shard_runs(tree: Batched) -> Batched:
     """Spread a batch (every leaf's leading axis is the run) over the available devices, so that each device
     (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up) simulates its share;
     unchanged on one device, when the runs do not split evenly, or when a device would get a single run (compiled
@@ -232,8 +246,8 @@ def run_batch(scenario: Scenario, seeds: Sequence[int]) -> SimResult:
     return run_setup(scenario, *prepare_batch(scenario, seeds), batched=True)
 
 
-def row(result: SimResult, i: int) -> SimResult:
-    """Run i of a batch result, as a single :class:`SimResult`."""
+def row(result: Batched, i: int) -> Batched:
+    """Run i of a batch result (a :class:`SimResult`, or any pytree with a leading batch axis), as a single one."""
     return jax.tree_util.tree_map(lambda leaf: leaf[i], result)
 
 
@@ -329,7 +343,9 @@ def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
     ]
 
 
-def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) -> list[dict]:
+def run_warnings(
+    scenario: Scenario, columns: dict, metrics: dict, nmse: Array | Sequence[float] | None = None
+) -> list[dict]:
     """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: a reference near the
     clamps (:func:`ddtrack.feasibility.check`), grip no floor could give (:func:`traction_warnings`), and the
     NN-adaptive controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`;
@@ -342,7 +358,12 @@ def run_warnings(scenario: Scenario, columns: dict, metrics: dict, nmse=None) ->
 
 
 def run_metrics(
-    scenario: Scenario, columns: dict, *, status: str, failure_time: float | None = None, nmse=None
+    scenario: Scenario,
+    columns: dict,
+    *,
+    status: str,
+    failure_time: float | None = None,
+    nmse: Array | Sequence[float] | None = None,
 ) -> dict:
     """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings."""
     sim = scenario.simulation
@@ -360,7 +381,16 @@ def run_metrics(
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def _metric_series(plant, controller, trajectory, x0, draws, disturbance, noise, **steps) -> tuple[dict, Array, Array]:
+def _metric_series(
+    plant: Plant,
+    controller: Controller,
+    trajectory: Trajectory,
+    x0: Array,
+    draws: Draws,
+    disturbance: WheelDisturbance,
+    noise: MeasurementNoise,
+    **steps: int,
+) -> tuple[dict, Array, Array]:
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)

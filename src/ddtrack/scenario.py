@@ -16,6 +16,7 @@ import types
 import typing
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from os import PathLike
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -27,6 +28,7 @@ from .controllers import (
     Backstepping,
     Cascade,
     ComputedTorque,
+    Controller,
     Emulator,
     NNAdaptiveBackstepping,
     WheelPD,
@@ -200,6 +202,7 @@ class ParameterDraw(_Section):
     def reach(self) -> float:
         """Largest possible |r|."""
         spread = self.relative if self.relative is not None else self.absolute
+        assert spread is not None  # the validator above requires one of the two
         return spread * (3.0 if self.distribution == "normal" else 1.0)
 
 
@@ -419,6 +422,7 @@ class WaypointsTrajectory(_Section):
         return self
 
     def build(self) -> Trajectory:
+        assert self.points is not None, "a waypoint file is read into points when the scenario loads"
         return polyline_path(self.points, speed=self.speed, corner_radius=self.corner_radius, loop=self.loop)
 
 
@@ -518,20 +522,25 @@ class _InnerLoopConfig(_Section):
         return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
 
 
-class BacksteppingConfig(_InnerLoopConfig):
-    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+class _KanayamaConfig(_InnerLoopConfig):
+    """The keys of Kanayama's law (paper eq. 12), shared by backstepping and its NN-adaptive form."""
 
-    kind: Literal["backstepping"]
     gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
     max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
     max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
     strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
 
     @model_validator(mode="after")
-    def _strict_needs_computed_torque(self) -> BacksteppingConfig:
+    def _strict_needs_computed_torque(self) -> _KanayamaConfig:
         if self.strict and self.inner != "computed_torque":
             raise FieldError("strict", 'strict = true needs inner = "computed_torque" (the cross term enters eq. 11)')
         return self
+
+
+class BacksteppingConfig(_KanayamaConfig):
+    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+
+    kind: Literal["backstepping"]
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
@@ -550,7 +559,7 @@ class BacksteppingConfig(_InnerLoopConfig):
 PositiveTriple = tuple[Positive, Positive, Positive]
 
 
-class NNAdaptiveConfig(BacksteppingConfig):
+class NNAdaptiveConfig(_KanayamaConfig):
     """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (model.md §3)."""
 
     kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
@@ -1001,6 +1010,18 @@ ControllerConfig = Annotated[
     Field(discriminator="kind"),
 ]
 
+#: the controllers whose outer law is Kanayama's, so that they have gains (Kx, Ky, Ktheta)
+KanayamaControllerConfig = (
+    BacksteppingConfig | NNAdaptiveConfig | SlidingModeConfig | KinematicBacksteppingConfig | AdaptiveBacksteppingConfig
+)
+
+
+def kanayama_gains(config: ControllerConfig) -> tuple[float, float, float]:
+    """(Kx, Ky, Ktheta) of a controller with Kanayama's outer law; a ConfigError naming ``controller.kind`` if not."""
+    if isinstance(config, KanayamaControllerConfig):
+        return config.gains
+    raise ConfigError("controller.kind", f"'{config.kind}' has no Kanayama gains (Kx, Ky, Ktheta)")
+
 
 # --- the scenario --------------------------------------------------------------------------------
 
@@ -1087,7 +1108,11 @@ def summary(model: type[BaseModel]) -> str:
 
 
 def load_scenario(
-    path: str | Path, *, overrides: Sequence[str] = (), seed: int | None = None, controller: str | None = None
+    path: str | PathLike[str],
+    *,
+    overrides: Sequence[str] = (),
+    seed: int | None = None,
+    controller: str | None = None,
 ) -> Scenario:
     """Read, override and validate a scenario file.
 
@@ -1336,6 +1361,7 @@ def build(
         pose = scenario.initial.pose
     x0 = jnp.asarray([*pose, *scenario.initial.velocity], dtype=float)
     config, key = scenario.controller, controller_key if controller_key is not None else jax.random.PRNGKey(0)
+    controller: Controller
     if isinstance(config, (RegulatedPurePursuitConfig, MPPIConfig)):  # they look ahead along the reference itself
         controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
     else:

@@ -74,7 +74,7 @@ def _type(schema: dict[str, Any], node: dict[str, Any]) -> str:
         return "[" + ", ".join(_type(schema, item) for item in node["prefixItems"]) + "]"
     if kind == "array":
         return f"list of {_type(schema, node['items'])}"
-    return {"number": "float", "integer": "int", "boolean": "bool", "string": "string"}.get(kind, str(kind))
+    return {"number": "float", "integer": "int", "boolean": "bool", "string": "string"}.get(str(kind), str(kind))
 
 
 BOUNDS = (("exclusiveMinimum", "> "), ("minimum", ">= "), ("exclusiveMaximum", "< "), ("maximum", "<= "))

@@ -16,6 +16,7 @@ import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ from ._format import significant, with_interval
 from .errors import ConfigError
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
 from .outdir import atomic_write
-from .scenario import CONTROLLERS, load_scenario
+from .scenario import CONTROLLERS, kanayama_gains, load_scenario
 from .shipped import scenario_path
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 from .tune import problems, tune
@@ -141,7 +142,10 @@ def _configuration(
     common: Sequence[str] = (),
 ) -> Configuration:
     kind = BASELINE if controller == TUNED else controller
-    extra = [f"controller.gains={toml_value(list(tuned_gains))}"] if controller == TUNED else []
+    extra = []
+    if controller == TUNED:
+        assert tuned_gains is not None, "the tuned controller's cells are planned once its gains are known"
+        extra = [f"controller.gains={toml_value(list(tuned_gains))}"]
     scenario = load_scenario(scenario_path(base), overrides=[*overrides, *extra, *common], controller=kind)
     return Configuration(controller, {"overrides": [*overrides, *extra, *common]}, scenario, labels)
 
@@ -153,7 +157,7 @@ def plan_suite(suite: Suite, controllers: Sequence[str], tuned_gains: Sequence[f
         for trajectory in suite.trajectories:
             base, overrides = TRAJECTORIES[trajectory]
             for level in suite.levels:
-                labels = {"study": "leaderboard", "trajectory": trajectory, "level": level}
+                labels: dict[str, str | float] = {"study": "leaderboard", "trajectory": trajectory, "level": level}
                 configurations.append(
                     _configuration(
                         controller, base, [*overrides, *_section_overrides(level)], tuned_gains, labels, suite.overrides
@@ -167,8 +171,8 @@ def plan_suite(suite: Suite, controllers: Sequence[str], tuned_gains: Sequence[f
                     "viscous_friction": 0.005 * friction,
                     "coulomb_friction": 0.05 * friction,
                 }
-                level = {**LEVELS["paper"], "plant": plant}
-                overrides = [f"{section}={toml_value(value)}" for section, value in level.items()]
+                sections = {**LEVELS["paper"], "plant": plant}
+                overrides = [f"{section}={toml_value(value)}" for section, value in sections.items()]
                 labels = {
                     "study": "robustness",
                     "trajectory": "circle",
@@ -241,7 +245,8 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
 def _ci(summary: dict | None, scale: float = 1.0) -> str:
     if not summary or summary["mean"] is None:
         return ""
-    return with_interval(*(None if summary[k] is None else scale * summary[k] for k in ("mean", "ci_low", "ci_high")))
+    low, high = (None if summary[k] is None else scale * summary[k] for k in ("ci_low", "ci_high"))
+    return with_interval(scale * summary["mean"], low, high)
 
 
 def board_markdown(board: list[dict], cells: dict) -> str:
@@ -369,7 +374,7 @@ def tune_on_paper_cases(steps: int, seeds: int = 2) -> list[float]:
     """Backstepping's gains tuned by ``ddtrack tune`` (its defaults: e_tr^2 over the metric window) on both paper
     cases."""
     specs = [load_scenario(scenario_path(name)) for name in ("paper_line", "paper_square")]
-    return list(tune(problems(specs, range(seeds)), specs[0].controller.gains, steps=steps).gains)
+    return list(tune(problems(specs, range(seeds)), kanayama_gains(specs[0].controller), steps=steps).gains)
 
 
 def run_suite(
@@ -410,7 +415,7 @@ def run_suite(
     pa.csv.write_csv(table, buffer)
     atomic_write(out / "leaderboard.csv", lambda f: f.write(buffer.getvalue()))
     for file, fig in figures(records, controllers, suite).items():
-        atomic_write(out / file, lambda f, fig=fig: fig.savefig(f, format="png", dpi=110))
+        atomic_write(out / file, partial(fig.savefig, format="png", dpi=110))
         plt.close(fig)
     summary = {
         "suite": dataclasses.asdict(suite),

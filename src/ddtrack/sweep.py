@@ -233,7 +233,8 @@ def _designs(sweep: SweepFile) -> Iterator[dict[str, Any]]:
         for values in itertools.product(*(sweep.grid[n] for n in names)):
             yield dict(zip(names, values, strict=True))
     else:
-        ranges = dict(sorted(sweep.random.__pydantic_extra__.items()))  # file order must not change the draws
+        assert sweep.random is not None  # SweepFile requires exactly one of grid and random
+        ranges = dict(sorted((sweep.random.__pydantic_extra__ or {}).items()))  # file order must not change the draws
         rng = np.random.Generator(np.random.PCG64(sweep.random.seed))
         draws = rng.uniform(size=(sweep.random.n, len(ranges)))
         for row in draws:
@@ -436,7 +437,7 @@ def run_sweep(
     done = len(existing)
     on_record(done, len(plan.runs))
     for future in as_completed(list(futures)):
-        configuration, part = futures.pop(future)
+        described, part = futures.pop(future)
         if future.status == "finished":
             records = future.result()
         else:  # the task could not run at all (e.g. it killed its workers too often): record why
@@ -445,7 +446,7 @@ def run_sweep(
             except Exception as cancelled:
                 exc = cancelled
             text = "".join(traceback.format_exception_only(exc)).strip()
-            records = [error_record(key, configuration, seed, text) for key, seed in part]
+            records = [error_record(key, described, seed, text) for key, seed in part]
         for record in records:
             write_record(out, record)
         done += len(records)

@@ -18,9 +18,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import operator
 from collections.abc import Callable, Sequence
+from functools import reduce
 from pathlib import Path
-from typing import NamedTuple
+from typing import IO, Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -32,8 +34,8 @@ from .metrics import window_mask
 from .model import DynamicPlant
 from .outdir import atomic_write
 from .runner import prepare_batch
-from .scenario import Scenario
-from .sim import simulate_batch
+from .scenario import Scenario, Setup
+from .sim import Draws, simulate_batch
 
 #: controllers whose gains can be tuned: kind -> the outer law's gain fields, in the scenario's ``gains`` order
 TUNABLE = {"backstepping": ("kx", "ky", "ktheta")}
@@ -47,8 +49,8 @@ class Problem(NamedTuple):
     """One training scenario: its prepared batch of seeds and how to simulate it."""
 
     scenario: Scenario
-    setup: object
-    draws: object
+    setup: Setup  #: a batch: every array with a leading axis over the seeds
+    draws: Draws
     divergence_error: float  #: [m], :meth:`Scenario.divergence_distance`, found before any tracing
 
 
@@ -114,7 +116,8 @@ def total_loss(
 ) -> jax.Array:
     """The mean of :func:`rollout_loss` over the training scenarios, as a function of log(gains)."""
     gains = jnp.exp(log_gains)
-    return sum(rollout_loss(p, gains, gamma, effort_weight, whole_run) for p in training) / len(training)
+    losses = [rollout_loss(p, gains, gamma, effort_weight, whole_run) for p in training]
+    return reduce(operator.add, losses) / len(training)  # summed in order, as sum() would
 
 
 def tune(
@@ -141,7 +144,7 @@ def tune(
     low, high = np.log(np.asarray(gain_min, float)), np.log(np.asarray(gain_max, float))
     log_gains = np.clip(np.log(np.asarray(initial, float)), low, high)
     first, second = np.zeros_like(log_gains), np.zeros_like(log_gains)
-    rate, history = learning_rate, []
+    rate, history = learning_rate, list[dict[str, Any]]()
     best = (math.inf, log_gains)
     for step in range(steps + 1):  # the last evaluation only scores the final gains
         loss, grad = (np.asarray(v, float) for v in loss_and_grad(jnp.asarray(log_gains)))
@@ -204,7 +207,7 @@ def write(out: Path, result: TuneResult, kind: str, settings: dict) -> None:
     atomic_write(out / "loss.png", lambda f: _loss_figure(result, f))
 
 
-def _loss_figure(result: TuneResult, file) -> None:
+def _loss_figure(result: TuneResult, file: IO[bytes]) -> None:
     import matplotlib.pyplot as plt
 
     steps = [r["step"] for r in result.history if r["loss"] is not None]

@@ -71,11 +71,11 @@ class Backstepping:
     [e_x, sin(e_th)/Ky] to the inner loop's u (model.md §2.4, not in the paper). Logs the gains.
     """
 
-    kx: float = 1.0
-    ky: float = 55.0
-    ktheta: float = 15.0
-    max_velocity: float = 2.0
-    max_yaw_rate: float = 4.0
+    kx: Array | float = 1.0
+    ky: Array | float = 55.0
+    ktheta: Array | float = 15.0
+    max_velocity: Array | float = 2.0
+    max_yaw_rate: Array | float = 4.0
     strict: bool = static_field(default=False)
 
     @property

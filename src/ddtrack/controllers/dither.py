@@ -7,7 +7,7 @@ from typing import Any
 import jax
 from jax import Array
 
-from .._pytree import pytree_dataclass
+from .._pytree import FloatVector, pytree_dataclass
 from ..trajectories import Reference
 from .base import Logs, VelocityCommand
 
@@ -19,7 +19,7 @@ class Dithered:
     which makes the command's effect identifiable (their closed-loop correlation is about 0.97)."""
 
     law: Any
-    std: Array = (0.05, 0.1)
+    std: FloatVector = (0.05, 0.1)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[Any, Array]:
         law_key, dither_key = jax.random.split(key)

@@ -8,13 +8,13 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass
+from .._pytree import FloatVector, pytree_dataclass
 from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
 from ..trajectories import Reference
 from .base import VelocityCommand
 
 
-def _saturate(tau: Array, limit: Array) -> tuple[Array, Array]:
+def _saturate(tau: Array, limit: Array | float) -> tuple[Array, Array]:
     return jnp.clip(tau, -limit, limit), jnp.any(jnp.abs(tau) > limit).astype(tau.dtype)
 
 
@@ -29,7 +29,7 @@ class ComputedTorque:
     """
 
     nominal: RobotParams
-    kc: Array = (10.0, 10.0)
+    kc: FloatVector = (10.0, 10.0)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()

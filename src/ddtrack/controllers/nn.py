@@ -77,7 +77,13 @@ def backprop(mlp: MLP, z_normalised: Array, target_normalised: Array) -> MLP:
 
 
 def momentum_step(
-    mlp: MLP, velocity: MLP, gradient: MLP, *, learning_rate: Array, momentum: Array, clip_norm: Array
+    mlp: MLP,
+    velocity: MLP,
+    gradient: MLP,
+    *,
+    learning_rate: Array | float,
+    momentum: Array | float,
+    clip_norm: Array | float,
 ) -> tuple[MLP, MLP]:
     """dW(k) = -eta * clip(grad) + beta * dW(k-1); W <- W + dW, for every weight array (model.md §3.7)."""
     norm = jnp.sqrt(total(jnp.concatenate([jnp.ravel(g**2) for g in jax.tree_util.tree_leaves(gradient)])))

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass, static_field
+from .._pytree import FloatVector, pytree_dataclass, static_field
 from ..geometry import body_increment, posture_error, rotation
 from ..trajectories import Reference
 from .backstepping import kanayama_command, velocity_command
@@ -142,18 +142,18 @@ class NNAdaptiveBackstepping:
     trajectory since adaptation last resumed.
     """
 
-    gains: Array  #: initial (Kx, Ky, Ktheta)
+    gains: FloatVector  #: initial (Kx, Ky, Ktheta)
     emulator: Emulator
     control_period: float
     analytic_coefficients: Array  #: (c_v, c_omega) of model.md §3.4 (a) for the nominal inner loop
-    rates: Array = (200.0, 200.0, 200.0)  #: Lambda [1/s], with the normalised Jacobian
+    rates: FloatVector = (200.0, 200.0, 200.0)  #: Lambda [1/s], with the normalised Jacobian
     gain_momentum: float = 0.0  #: beta_K
-    max_step: Array = (0.05, 5.0, 0.5)  #: per-sample clip of the gain change
-    gain_min: Array = (0.1, 1.0, 0.1)
-    gain_max: Array = (10.0, 600.0, 60.0)
+    max_step: FloatVector = (0.05, 5.0, 0.5)  #: per-sample clip of the gain change
+    gain_min: FloatVector = (0.1, 1.0, 0.1)
+    gain_max: FloatVector = (10.0, 600.0, 60.0)
     gate_error: float = 0.5  #: [m]
     leakage: float = 0.0  #: sigma [1/s], pull towards the initial gains
-    gamma: Array = (1.0, 50.0, 1.0)  #: Gamma of eq. 22
+    gamma: FloatVector = (1.0, 50.0, 1.0)  #: Gamma of eq. 22
     learning_rate: float = 0.2  #: emulator eta
     momentum: float = 0.3  #: emulator beta
     clip_norm: float = 5.0  #: emulator gradient-norm clip
@@ -243,6 +243,7 @@ class NNAdaptiveBackstepping:
         )
         sensitivity, c_v = memory.sensitivity, jnp.asarray(self.analytic_coefficients)[0]
         if self.jacobian == "model_sensitivity":
+            assert sensitivity is not None, "init() gives model_sensitivity a sensitivity"
             gradient = sensitivity_gradient(
                 error, y, jnp.asarray(self.gamma), sensitivity, self.error_jacobian == "exact"
             )

@@ -68,7 +68,7 @@ import dataclasses
 import math
 from functools import partial
 from os import PathLike
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, NamedTuple
 
 import gymnasium
 import jax
@@ -82,7 +82,7 @@ from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
 from ..model import DynamicPlant
 from ..runner import prepare
-from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, load_scenario
+from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, kanayama_gains, load_scenario
 from ..shipped import scenario_path
 from ..sim import STATUS_NAMES, Draws, period_status, plant_period
 
@@ -197,9 +197,8 @@ def _step(
     remaining = episode.n_steps - k  # this period and the ones after it
     cost = jnp.where(keep, cost + episode.effort_weight * effort, remaining * episode.cost_bound)
     reward = -episode.control_period * cost
-    packed = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, x_next]
-    packed = jnp.concatenate(packed if gains is None else [*packed, gains])
-    return x_next, next_memory, packed
+    parts = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, x_next]
+    return x_next, next_memory, jnp.concatenate(parts if gains is None else [*parts, gains])
 
 
 class DiffDriveTrackingEnv(gymnasium.Env):
@@ -221,7 +220,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         gains mode cannot drive, a negative ``effort_weight``, a ``render_mode``.
     """
 
-    metadata: ClassVar[dict[str, list[str]]] = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (an instance attribute in gymnasium.Env)
 
     def __init__(
         self,
@@ -256,7 +255,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         sim, config = self.scenario.simulation, self.scenario.controller
         self._gains_mode = action_mode == "gains"
         if self._gains_mode:
-            anchor = np.asarray(config.gains, dtype=float)
+            anchor = np.asarray(kanayama_gains(config), dtype=float)
             bounds = scenario_gain_bounds(given)
             self.gain_min = np.minimum(np.asarray(bounds[0], float), anchor)
             self.gain_max = np.maximum(np.asarray(bounds[1], float), anchor)
@@ -269,12 +268,12 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         # clipped to the float64 copies of these float32 bounds, an observation stays inside them after the cast
         low32, high32 = np.asarray(low, np.float32), np.asarray(high, np.float32)
         self.observation_space = spaces.Box(low32, high32, dtype=np.float32)
-        n_actions = 3 if self._gains_mode else 2
+        self._n_actions = n_actions = 3 if self._gains_mode else 2  # three gains or two wheel torques
         self.action_space = spaces.Box(
             -np.ones(n_actions, np.float32), np.ones(n_actions, np.float32), dtype=np.float32
         )
         self._n_obs = len(low)
-        self._constants = {
+        self._constants: dict[str, Any] = {
             "control_period": sim.control_period,
             "n_steps": sim.n_steps,
             "divergence_error": distance,
@@ -358,7 +357,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         """One control period under ``action`` (clipped to [-1, 1]); see the module docstring."""
         if self._done:
             raise RunError("the episode has ended or not begun: call reset() before step()")
-        n_actions = self.action_space.shape[0]
+        n_actions = self._n_actions
         action = np.asarray(action, dtype=float)
         if action.shape != (n_actions,):
             raise ConfigError("action", f"expected shape ({n_actions},) in {self.action_mode} mode, got {action.shape}")

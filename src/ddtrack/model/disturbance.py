@@ -10,7 +10,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass
+from .._pytree import FloatVector, pytree_dataclass
 
 
 @pytree_dataclass
@@ -26,11 +26,11 @@ class WheelDisturbance:
     std : (2,) standard deviation of the Gaussian part, held per control period [N m]
     """
 
-    bias: Array = (0.0, 0.0)
-    amplitude: Array = (0.0, 0.0)
+    bias: FloatVector = (0.0, 0.0)
+    amplitude: FloatVector = (0.0, 0.0)
     frequency: float = 0.0
-    phase: Array = (0.0, 0.0)
-    std: Array = (0.0, 0.0)
+    phase: FloatVector = (0.0, 0.0)
+    std: FloatVector = (0.0, 0.0)
 
     def torque(self, t: Array, xi: Array) -> Array:
         """Disturbance at time ``t`` given the standard-normal draw ``xi`` (2,) of that period."""
@@ -47,7 +47,7 @@ class MeasurementNoise:
     std : (5,) standard deviations of [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
     """
 
-    std: Array = (0.0, 0.0, 0.0, 0.0, 0.0)
+    std: FloatVector = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def measure(self, x: Array, xi: Array) -> Array:
         return x + jnp.asarray(self.std) * xi

@@ -42,6 +42,6 @@ class RobotParams:
     max_torque: float = 10.0
 
     @property
-    def inertia_axle(self):
+    def inertia_axle(self) -> float:
         """I_A = I_C + m d^2, yaw inertia about the axle midpoint [kg m^2]."""
         return self.inertia + self.mass * self.com_offset**2

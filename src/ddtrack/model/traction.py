@@ -17,6 +17,7 @@ mu = v^2 / (r g) (``tests/test_traction.py``). Pure NumPy: it runs on the record
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 GRAVITY = 9.80665  #: standard gravity [m/s^2]
 #: an assumed, generous upper bound for robot wheels on real floors: rubber on dry concrete is about 1.0 static,
@@ -33,7 +34,14 @@ def _rate(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def contact_forces(
-    t, v, omega, *, mass: float, inertia_axle: float, com_offset: float, half_axle: float
+    t: npt.ArrayLike,
+    v: npt.ArrayLike,
+    omega: npt.ArrayLike,
+    *,
+    mass: float,
+    inertia_axle: float,
+    com_offset: float,
+    half_axle: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(F_R, F_L, F_y) [N]: the floor's longitudinal force on each wheel and its total lateral force, per sample."""
     t, v, omega = (np.asarray(a, dtype=float) for a in (t, v, omega))
@@ -45,7 +53,14 @@ def contact_forces(
 
 
 def required_friction(
-    t, v, omega, *, mass: float, inertia_axle: float, com_offset: float, half_axle: float
+    t: npt.ArrayLike,
+    v: npt.ArrayLike,
+    omega: npt.ArrayLike,
+    *,
+    mass: float,
+    inertia_axle: float,
+    com_offset: float,
+    half_axle: float,
 ) -> np.ndarray:
     """The friction coefficient the more loaded wheel needed at each sample, max_i |(F_i, F_y / 2)| / (m g / 2)."""
     right, left, lateral = contact_forces(
@@ -55,7 +70,9 @@ def required_friction(
     return np.maximum(np.hypot(right, lateral / 2.0), np.hypot(left, lateral / 2.0)) / normal
 
 
-def wheel_speeds(v, omega, *, wheel_radius: float, half_axle: float) -> tuple[np.ndarray, np.ndarray]:
+def wheel_speeds(
+    v: npt.ArrayLike, omega: npt.ArrayLike, *, wheel_radius: float, half_axle: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(phi_dot_R, phi_dot_L) [rad/s] = ((v + L omega) / R, (v - L omega) / R)."""
     v, omega = np.asarray(v, dtype=float), np.asarray(omega, dtype=float)
     return (v + half_axle * omega) / wheel_radius, (v - half_axle * omega) / wheel_radius

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from jax import Array, lax
 
 
-def rk4_step(f: Callable[[Array], Array], x: Array, h: Array) -> Array:
+def rk4_step(f: Callable[[Array], Array], x: Array, h: Array | float) -> Array:
     """One classical fourth-order Runge-Kutta step of x_dot = f(x) with step ``h`` (global error O(h^4))."""
     k1 = f(x)
     k2 = f(x + 0.5 * h * k1)
@@ -16,7 +16,7 @@ def rk4_step(f: Callable[[Array], Array], x: Array, h: Array) -> Array:
     return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def rk4(f: Callable[[Array], Array], x: Array, duration: Array, steps: int) -> Array:
+def rk4(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: int) -> Array:
     """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal RK4 steps (``steps`` is static)."""
     h = duration / steps
     return lax.fori_loop(0, steps, lambda _, z: rk4_step(f, z, h), x)

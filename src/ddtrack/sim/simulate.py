@@ -46,7 +46,7 @@ def plant_period(
     xi_disturbance: Array,
     *,
     disturbance: WheelDisturbance,
-    control_period: float,
+    control_period: Array | float,
     substeps: int,
 ) -> tuple[Array, Array]:
     """Advance the plant over one control period under the held input: the simulator's own step.
@@ -77,7 +77,13 @@ def plant_period(
 
 
 def period_status(
-    x: Array, x_next: Array, u: Array, error: Array, *, divergence_error: float = 50.0, divergence_speed: float = 50.0
+    x: Array,
+    x_next: Array,
+    u: Array,
+    error: Array,
+    *,
+    divergence_error: Array | float = 50.0,
+    divergence_speed: Array | float = 50.0,
 ) -> Array:
     """The status of one control period (``STATUS_NAMES``): 2 (``non_finite``) when x_{k+1} or the held input
     is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds

@@ -26,7 +26,7 @@ class Reference(NamedTuple):
 class Trajectory(Protocol):
     """A time-parametrised reference: a pure function ``t [s] -> Reference``."""
 
-    def __call__(self, t: Array) -> Reference: ...
+    def __call__(self, t: Array | float) -> Reference: ...
 
 
 class ParametricCurve:
@@ -40,7 +40,7 @@ class ParametricCurve:
     def position(self, t: Array) -> Array:
         raise NotImplementedError
 
-    def __call__(self, t: Array) -> Reference:
+    def __call__(self, t: Array | float) -> Reference:
         t = jnp.asarray(t, dtype=float)
 
         def derivative(f):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass, static_field
+from .._pytree import FloatVector, pytree_dataclass, static_field
 from .base import ParametricCurve
 
 
@@ -16,7 +16,7 @@ class Line(ParametricCurve):
     Attributes: ``start`` (2,) [m], position at t = 0; ``heading`` [rad]; ``speed`` v_r > 0 [m/s].
     """
 
-    start: Array = (0.0, 0.0)
+    start: FloatVector = (0.0, 0.0)
     heading: float = 0.0
     speed: float = 0.5
 
@@ -30,7 +30,7 @@ class Circle(ParametricCurve):
     """Circle of ``radius`` [m] about ``center`` (2,) [m] at ``speed`` [m/s], starting at polar angle
     ``start_angle`` [rad], counter-clockwise unless ``clockwise``."""
 
-    center: Array = (0.0, 0.0)
+    center: FloatVector = (0.0, 0.0)
     radius: float = 2.0
     speed: float = 0.5
     start_angle: float = -jnp.pi / 2
@@ -50,7 +50,7 @@ class FigureEight(ParametricCurve):
     varies between sqrt(7)/4*size*w (where cos^2(wt) = 3/8) and sqrt(2)*size*w (at the crossing): it never stops.
     """
 
-    center: Array = (0.0, 0.0)
+    center: FloatVector = (0.0, 0.0)
     size: float = 3.0
     period: float = 60.0
 
@@ -64,7 +64,7 @@ class Sinusoid(ParametricCurve):
     """A sine wave about a straight axis: the axis is run at ``speed`` [m/s] from ``start`` along
     ``heading`` [rad], with lateral ``amplitude`` [m] and ``wavelength`` [m] along the axis."""
 
-    start: Array = (0.0, 0.0)
+    start: FloatVector = (0.0, 0.0)
     heading: float = 0.0
     speed: float = 0.5
     amplitude: float = 1.0

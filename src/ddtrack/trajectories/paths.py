@@ -34,8 +34,9 @@ class PiecewisePath:
     speed: float
     loop: bool = static_field(default=False)
 
-    def __call__(self, t: Array) -> Reference:
+    def __call__(self, t: Array | float) -> Reference:
         travelled = self.speed * jnp.asarray(t, dtype=float)
+        moving: Array | bool
         if self.loop:
             s, moving = jnp.mod(travelled, self.length), True
         else:

@@ -21,7 +21,7 @@ class SampledTrajectory:
     table: Array
     step: float
 
-    def __call__(self, t: Array) -> Reference:
+    def __call__(self, t: Array | float) -> Reference:
         i = jnp.clip(jnp.round(jnp.asarray(t, float) / self.step).astype(int), 0, self.table.shape[0] - 1)
         return Reference(*self.table[i])
 

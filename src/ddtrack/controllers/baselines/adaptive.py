@@ -50,7 +50,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from ..._pytree import pytree_dataclass
+from ..._pytree import FloatVector, pytree_dataclass
 from ...model import RobotParams, reduced_input_inverse, reduced_mass, wheel_speeds
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
@@ -89,10 +89,10 @@ class AdaptiveComputedTorque:
     """
 
     nominal: RobotParams
-    kc: Array = (10.0, 10.0)
-    gamma: Array = (500.0, 5.0, 1e-4)
-    lower: Array = (5.0, 0.28, 0.0)
-    upper: Array = (20.0, 1.12, 0.05)
+    kc: FloatVector = (10.0, 10.0)
+    gamma: FloatVector = (500.0, 5.0, 1e-4)
+    lower: FloatVector = (5.0, 0.28, 0.0)
+    upper: FloatVector = (20.0, 1.12, 0.05)
     control_period: float = 0.01
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Array:

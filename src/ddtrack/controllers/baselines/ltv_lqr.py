@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from ..._pytree import pytree_dataclass, static_field
+from ..._pytree import FloatVector, pytree_dataclass, static_field
 from ...geometry import error_rates, posture_error
 from ...trajectories import Reference
 from ..backstepping import clamp_command
@@ -87,8 +87,8 @@ class LTVUnicycleLQR:
     would be late by a period and spike at corners. Stateless.
     """
 
-    q_tolerance: Array = (0.0625, 0.125, 2.0)
-    r_tolerance: Array = (1.0, 2.0)
+    q_tolerance: FloatVector = (0.0625, 0.125, 2.0)
+    r_tolerance: FloatVector = (1.0, 2.0)
     control_period: float = 0.01
     min_velocity: float = 1e-4
     max_velocity: float = 2.0

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..._ordered import total
-from ..._pytree import pytree_dataclass, static_field
+from ..._pytree import FloatVector, pytree_dataclass, static_field
 from ...geometry import wrap_angle
 from ...model import RobotParams, body_acceleration
 from ...trajectories import Reference, Trajectory
@@ -124,7 +124,7 @@ class MPPI:
     model_step: float = 0.05
     control_period: float = 0.01
     temperature: float = 1.0
-    noise_std: Array = (0.2, 0.2)
+    noise_std: FloatVector = (0.2, 0.2)
     samples: int = static_field(default=64)
     horizon: int = static_field(default=20)
 

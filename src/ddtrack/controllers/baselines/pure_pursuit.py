@@ -65,7 +65,9 @@ from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
 
-def lookahead_distance(speed: Array, lookahead_time: Array, min_lookahead: Array, max_lookahead: Array) -> Array:
+def lookahead_distance(
+    speed: Array, lookahead_time: Array | float, min_lookahead: Array | float, max_lookahead: Array | float
+) -> Array:
     """Adaptive lookahead L = clip(|v| l_t, L_min, L_max) [m].
 
     As in Macenski et al. 2023 (Nav2's velocity-scaled lookahead).
@@ -106,7 +108,7 @@ def pursuit_curvature(carrot: Array, pose: Array) -> tuple[Array, Array]:
     return kappa, jnp.arctan2(y_c, x_c)
 
 
-def curvature_regulation(speed: Array, kappa: Array, min_radius: Array) -> Array:
+def curvature_regulation(speed: Array, kappa: Array, min_radius: Array | float) -> Array:
     """The paper's curvature heuristic: speed * r / r_min on arcs tighter than r_min (r = 1/|kappa|), else speed."""
     return speed * jnp.minimum(1.0, 1.0 / jnp.maximum(jnp.abs(kappa) * min_radius, 1e-300))
 

@@ -28,14 +28,14 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from ..._pytree import pytree_dataclass
+from ..._pytree import FloatVector, pytree_dataclass
 from ...model import RobotParams
 from ...trajectories import Reference
 from ..base import VelocityCommand
 from ..inner import ComputedTorque
 
 
-def switching_term(s: Array, gain: Array, boundary_layer: Array) -> Array:
+def switching_term(s: Array, gain: FloatVector, boundary_layer: FloatVector) -> Array:
     """K_s sat(s / phi): magnitude K_s outside |s| > phi, linear K_s s / phi inside (Slotine and Li sec. 7.2)."""
     return jnp.asarray(gain, float) * jnp.clip(s / jnp.asarray(boundary_layer, float), -1.0, 1.0)
 
@@ -50,9 +50,9 @@ class SlidingModeTorque:
     """
 
     nominal: RobotParams
-    kc: Array = (10.0, 10.0)
-    switching_gain: Array = (1.0, 2.0)
-    boundary_layer: Array = (0.02, 0.04)
+    kc: FloatVector = (10.0, 10.0)
+    switching_gain: FloatVector = (1.0, 2.0)
+    boundary_layer: FloatVector = (0.02, 0.04)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()
