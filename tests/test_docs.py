@@ -4,7 +4,10 @@ and docs lands on a file and, with an anchor, on a heading."""
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+import sys
 
 import pytest
 from conftest import ROOT
@@ -67,3 +70,19 @@ def test_the_guide_documents_velocity_command_plotting_and_completion():
     public = [name for name in dir(plotting) if name.startswith("plot_")]
     assert public and all(f"`{name}(" in guide for name in public)
     assert "_DDTRACK_COMPLETE=bash_source ddtrack" in guide
+
+
+def test_the_site_builds_strict(tmp_path):
+    """`mkdocs build --strict` (README, "Documentation"): every page in the navigation, no broken link or anchor, no
+    docstring the API reference cannot read; a warning fails it. Needs no network."""
+    config = ROOT / "mkdocs.yml"
+    built = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(config), "-d", str(tmp_path / "site")],
+        capture_output=True,
+        text=True,
+        env=os.environ | {"NO_MKDOCS_2_WARNING": "1"},
+        timeout=300,
+    )
+    assert built.returncode == 0, built.stderr[-4000:]
+    api = (tmp_path / "site" / "api" / "runner" / "index.html").read_text()
+    assert all(f'id="ddtrack.runner.{name}"' in api for name in ("run", "run_batch", "monte_carlo", "prepare"))

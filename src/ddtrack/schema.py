@@ -102,7 +102,9 @@ def _value(value: Any) -> str:
 
 
 def _cell(text: str) -> str:
-    return _markdown(text).replace("|", "\\|")
+    # "[v, omega] [m/s, rad/s]" would read as a reference link "[text][label]" to Python-Markdown (the site):
+    # the second bracket escaped reads as plain text there and on GitHub alike
+    return _markdown(text).replace("|", "\\|").replace("] [", "] \\[")
 
 
 def _markdown(text: str) -> str:

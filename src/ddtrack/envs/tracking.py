@@ -208,10 +208,14 @@ class DiffDriveTrackingEnv(gymnasium.Env):
 
     Parameters
     ----------
-    scenario : a scenario file path or a :class:`ddtrack.Scenario`
-    action_mode : ``"torque"`` (wheel torques) or ``"gains"`` (Kx, Ky, Ktheta of the backstepping law)
-    effort_weight : w of the reward's effort term [1/(N m)^2], default :data:`DEFAULT_EFFORT_WEIGHT`
-    render_mode : only ``None`` (no rendering)
+    scenario
+        a scenario file path or a :class:`ddtrack.Scenario`
+    action_mode
+        ``"torque"`` (wheel torques) or ``"gains"`` (Kx, Ky, Ktheta of the backstepping law)
+    effort_weight
+        w of the reward's effort term [1/(N m)^2], default :data:`DEFAULT_EFFORT_WEIGHT`
+    render_mode
+        only ``None`` (no rendering)
 
     Raises
     ------

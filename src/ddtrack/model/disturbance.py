@@ -19,11 +19,16 @@ class WheelDisturbance:
 
     Attributes
     ----------
-    bias : (2,) constant part [N m]
-    amplitude : (2,) sinusoid amplitude [N m]
-    frequency : sinusoid angular frequency [rad/s]
-    phase : (2,) sinusoid phase [rad]
-    std : (2,) standard deviation of the Gaussian part, held per control period [N m]
+    bias
+        (2,) constant part [N m]
+    amplitude
+        (2,) sinusoid amplitude [N m]
+    frequency
+        sinusoid angular frequency [rad/s]
+    phase
+        (2,) sinusoid phase [rad]
+    std
+        (2,) standard deviation of the Gaussian part, held per control period [N m]
     """
 
     bias: FloatVector = (0.0, 0.0)
@@ -44,7 +49,8 @@ class MeasurementNoise:
 
     Attributes
     ----------
-    std : (5,) standard deviations of [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
+    std
+        (5,) standard deviations of [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
     """
 
     std: FloatVector = (0.0, 0.0, 0.0, 0.0, 0.0)

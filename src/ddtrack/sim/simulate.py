@@ -23,9 +23,12 @@ class Draws(NamedTuple):
 
     Attributes
     ----------
-    disturbance : (N, 2) standard-normal draws for the Gaussian wheel-torque disturbance, one per period
-    noise : (N, 5) standard-normal draws for the measurement noise, one per period
-    controller_key : the PRNG key handed to ``controller.init`` (e.g. an MPPI sampler, dither)
+    disturbance
+        (N, 2) standard-normal draws for the Gaussian wheel-torque disturbance, one per period
+    noise
+        (N, 5) standard-normal draws for the measurement noise, one per period
+    controller_key
+        the PRNG key handed to ``controller.init`` (e.g. an MPPI sampler, dither)
     """
 
     disturbance: Array  #: (N, 2) standard-normal draws for the Gaussian disturbance, one per period
@@ -57,18 +60,27 @@ def plant_period(
 
     Parameters
     ----------
-    plant : a ``ddtrack.model.Plant``
-    x : (5,) state x_k = [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s]
-    u : (2,) plant input before saturation: wheel torques [N m], or (v, omega) for a kinematic plant
-    t : t_k [s]
-    xi_disturbance : (2,) this period's standard-normal disturbance draw
-    disturbance : the wheel-torque disturbance
-    control_period : T_c [s]
-    substeps : RK4 steps per period (static under ``jit``)
+    plant
+        a ``ddtrack.model.Plant``
+    x
+        (5,) state x_k = [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s]
+    u
+        (2,) plant input before saturation: wheel torques [N m], or (v, omega) for a kinematic plant
+    t
+        t_k [s]
+    xi_disturbance
+        (2,) this period's standard-normal disturbance draw
+    disturbance
+        the wheel-torque disturbance
+    control_period
+        T_c [s]
+    substeps
+        RK4 steps per period (static under ``jit``)
 
     Returns
     -------
-    (u, x_next) : the saturated input actually held [N m or m/s, rad/s], and x_{k+1}
+    tuple of Array
+        ``(u, x_next)``: the saturated input actually held [N m or m/s, rad/s], and x_{k+1}
     """
     u = plant.saturate(u)
     tau_d = disturbance.torque(t, xi_disturbance)
@@ -134,15 +146,23 @@ def simulate(
 
     Parameters
     ----------
-    plant, controller, trajectory : pytrees following their protocols (``ddtrack.model.Plant``,
+    plant, controller, trajectory
+        pytrees following their protocols (``ddtrack.model.Plant``,
         ``ddtrack.controllers.Controller``, ``ddtrack.trajectories.Trajectory``)
-    x0 : (5,) initial state [x, y, theta, v, omega]
-    draws : the run's random draws (:class:`Draws`), shapes (n_steps, 2) and (n_steps, 5)
-    n_steps : number of control periods N (static)
-    control_period : T_c [s]
-    substeps : RK4 steps per control period (static)
-    disturbance, noise : the wheel-torque disturbance and the pose-measurement noise
-    divergence_error, divergence_speed : thresholds of the ``diverged`` status [m], [m/s or rad/s]
+    x0
+        (5,) initial state [x, y, theta, v, omega]
+    draws
+        the run's random draws (:class:`Draws`), shapes (n_steps, 2) and (n_steps, 5)
+    n_steps
+        number of control periods N (static)
+    control_period
+        T_c [s]
+    substeps
+        RK4 steps per control period (static)
+    disturbance, noise
+        the wheel-torque disturbance and the pose-measurement noise
+    divergence_error, divergence_speed
+        thresholds of the ``diverged`` status [m], [m/s or rad/s]
 
     Returns
     -------
