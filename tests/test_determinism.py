@@ -118,6 +118,7 @@ def test_a_batch_row_is_the_single_run_bit_for_bit(kind):
         assert_same_bits(ddtrack.timeseries(row(batch, i)), ddtrack.timeseries(single))
         assert int(row(batch, i).failure_index) == int(single.failure_index)
         assert metrics_of(scenario, row(batch, i)) == metrics_of(scenario, single)
+    assert not np.array_equal(np.asarray(row(batch, 0).state), np.asarray(row(batch, 1).state))  # the seeds reach it
 
 
 @pytest.mark.slow

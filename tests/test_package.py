@@ -204,7 +204,7 @@ def test_ci_runs_the_readme_test_command():
     blocks = re.findall(r"```bash\n(.*?)\n```", readme, flags=re.S)
     assert len(blocks) >= 2 and "ddtrack run scenarios/paper_line.toml" in blocks[0]
     test_command = blocks[1].strip()
-    assert "pytest" in test_command
+    assert test_command.endswith("scripts/check")  # lint, types, docs, then pytest (tests/test_quality.py)
     ci = (ROOT / ".ci" / "run").read_text().strip().splitlines()
     assert ci[-1] == test_command
 

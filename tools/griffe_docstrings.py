@@ -15,29 +15,13 @@ from typing import Any
 
 import griffe
 
+import ddtrack
+
 ROLE = re.compile(r":(?:py:)?(?:func|class|meth|attr|data|const|exc|mod|obj):`(~?)([\w.]+)(?:\(\))?`")
 REFERENCE_LIKE = re.compile(r"\] \[")
 LITERAL_BLOCK = re.compile(r"(\S)::\n\n")
-# import ddtrack exposes these lazily (ddtrack/__init__.py); point them at the module that defines them
-TOP_LEVEL = {
-    "ConfigError": "errors",
-    "DdtrackError": "errors",
-    "RunError": "errors",
-    "improvement": "metrics",
-    "summarize": "metrics",
-    "tracking_error": "metrics",
-    "monte_carlo": "runner",
-    "prepare": "runner",
-    "run": "runner",
-    "run_batch": "runner",
-    "Scenario": "scenario",
-    "load_scenario": "scenario",
-    "validate_scenario": "scenario",
-    "Draws": "sim",
-    "SimResult": "sim",
-    "simulate": "sim",
-    "timeseries": "sim",
-}
+# import ddtrack exposes these lazily; point them at the module that defines them (import ddtrack is light)
+TOP_LEVEL = ddtrack._SOURCES
 
 
 def _target(obj: griffe.Object, name: str) -> str:
