@@ -423,7 +423,8 @@ def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
                 assert records[key]["metrics"][name] == pytest.approx(row[name], rel=0, abs=1e-12)
 
 
-def test_unreachable_scheduler_exits_2_and_leaves_no_folder(tmp_path, cli):
+def test_unreachable_scheduler_exits_2_and_leaves_no_folder(tmp_path, cli, monkeypatch):
+    monkeypatch.setattr("ddtrack.cluster.CONNECT_TIMEOUT_S", 2)  # the default 20 s, shortened for the suite
     sweep_file = write_sweep(tmp_path)
     with socket.socket() as closed:  # a loopback port that nothing listens on
         closed.bind(("127.0.0.1", 0))

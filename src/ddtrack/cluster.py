@@ -12,6 +12,8 @@ import click
 
 from .errors import ConfigError, RunError
 
+CONNECT_TIMEOUT_S = 20  #: how long sweep and bench try to reach a running scheduler before exit 2 [s]
+
 
 def cluster_options(command: Callable) -> Callable:
     """The options that choose where ``sweep`` and ``bench`` run.
@@ -68,7 +70,9 @@ def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int
         if scheduler is not None or scheduler_file is not None:
             try:
                 client = Client(
-                    scheduler, scheduler_file=None if scheduler_file is None else str(scheduler_file), timeout="20s"
+                    scheduler,
+                    scheduler_file=None if scheduler_file is None else str(scheduler_file),
+                    timeout=f"{CONNECT_TIMEOUT_S}s",
                 )
             except (OSError, TimeoutError) as exc:
                 raise RunError(f"cannot reach the Dask scheduler ({exc})") from None
