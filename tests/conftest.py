@@ -24,18 +24,6 @@ def central_difference(f, x: np.ndarray, h: float) -> np.ndarray:
     return np.stack(columns, axis=-1)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def fresh_compilations_per_module():
-    """Drop every compiled program after each test module. One process compiles well over a thousand XLA
-    executables over the suite; with them all held, XLA's CPU compiler crashed (segfault, abort) late in four runs
-    while the emulator's and MPPI's products were unrolled term by term (since removed; a run without this guard
-    then passed, 11 min 40 s against 12 min 05 s with it). Kept as a cheap guard."""
-    yield
-    import jax
-
-    jax.clear_caches()
-
-
 @pytest.fixture(scope="session", autouse=True)
 def no_persistent_cache_in_this_process():
     """In-process CLI calls leave JAX's persistent compilation cache off. It is process-global: once on, every later
