@@ -1,0 +1,358 @@
+"""The ``[controller]`` section of the baseline controllers, the union of every controller kind, and the gains of
+those whose outer law is Kanayama's.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+import jax
+from pydantic import Field, model_validator
+
+from ..controllers import (
+    Backstepping,
+    Cascade,
+)
+from ..controllers.baselines import (
+    MPPI,
+    AdaptiveComputedTorque,
+    LTVUnicycleLQR,
+    MPPICost,
+    RegulatedPurePursuit,
+    SlidingModeTorque,
+)
+from ..errors import ConfigError
+from ..model import RobotParams
+from ..trajectories import Trajectory
+from ._base import (
+    FieldError,
+    NonNegative,
+    Positive,
+    _Section,
+)
+from .controller_configs import BacksteppingConfig, NNAdaptiveConfig, PositiveTriple, _InnerLoopConfig
+
+
+class LTVLQRConfig(_InnerLoopConfig):
+    """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
+
+    kind: Literal["ltv_lqr"]
+    q_tolerance: PositiveTriple = Field(
+        (0.0625, 0.125, 2.0),
+        description=(
+            "Tolerated (e_x [m], e_y [m], e_theta [rad]); Q = diag(1/q^2) (Bryson's rule, WPILib's defaults)."
+        ),
+    )
+    r_tolerance: tuple[Positive, Positive] = Field(
+        (1.0, 2.0), description=("Tolerated velocity correction (v [m/s], omega [rad/s]); R = diag(1/r^2).")
+    )
+    min_velocity: Positive = Field(
+        1e-4, description=("|v_r| below this is linearised at this speed, where e_y stays controllable [m/s].")
+    )
+    dare_iterations: int = Field(
+        32,
+        ge=1,
+        le=64,
+        description=("Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."),
+    )
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    @model_validator(mode="after")
+    def _min_velocity_below_clamp(self) -> LTVLQRConfig:
+        if self.min_velocity >= self.max_velocity:
+            raise FieldError(
+                "min_velocity",
+                f"{self.min_velocity:g} m/s must be below max_velocity ({self.max_velocity:g} m/s); WPILib uses 1e-4",
+            )
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        outer = LTVUnicycleLQR(
+            q_tolerance=self.q_tolerance,
+            r_tolerance=self.r_tolerance,
+            control_period=control_period,
+            min_velocity=self.min_velocity,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            dare_iterations=self.dare_iterations,
+        )
+        # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
+
+class SlidingModeConfig(_Section):
+    """Kanayama backstepping over a sliding-mode inner loop with a boundary layer (Slotine and Li 7.1-7.2)."""
+
+    kind: Literal["sliding_mode_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11, the linear part [1/s].")
+    switching_gain: tuple[NonNegative, NonNegative] = Field(
+        (1.0, 2.0),
+        description=(
+            "K_s (v [m/s^2], omega [rad/s^2]): must exceed the matched disturbance as an acceleration; 0 gives "
+            "computed torque."
+        ),
+    )
+    boundary_layer: tuple[Positive, Positive] = Field(
+        (0.02, 0.04),
+        description=(
+            "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."
+        ),
+    )
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(
+            kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate
+        )
+        return Cascade(
+            outer,
+            SlidingModeTorque(
+                nominal, kc=self.kc, switching_gain=self.switching_gain, boundary_layer=self.boundary_layer
+            ),
+        )
+
+
+class KinematicBacksteppingConfig(_Section):
+    """Kanayama's law on the unicycle with ideal velocity tracking: a reference point (paper eq. 12, model.md §2.4)."""
+
+    kind: Literal["kinematic_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Backstepping:
+        """The velocity law alone, which drives the kinematic plant (:attr:`Setup.plant`); ``key`` is unused."""
+        kx, ky, ktheta = self.gains
+        return Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate)
+
+
+class RegulatedPurePursuitConfig(_InnerLoopConfig):
+    """Regulated pure pursuit (Macenski et al. 2023, Nav2) keeping pace with the reference, over an inner loop."""
+
+    kind: Literal["regulated_pure_pursuit"]
+    lookahead_time: NonNegative = Field(
+        1.5, description=("Lookahead L = |v| * lookahead_time, clipped to [min_lookahead, max_lookahead] [s].")
+    )
+    min_lookahead: Positive = Field(0.3, description="Smallest lookahead distance [m].")
+    max_lookahead: Positive = Field(0.9, description="Largest lookahead distance [m]; equal to min_lookahead: fixed.")
+    pace_gain: NonNegative = Field(
+        1.0, description=("k_s: desired speed v_r + k_s e_x, so the along-track error e_x decays at this rate [1/s].")
+    )
+    min_radius: NonNegative = Field(
+        0.9,
+        description=(
+            "Arcs tighter than this radius slow the robot by radius / min_radius; 0 turns the regulation off [m]."
+        ),
+    )
+    min_regulated_speed: NonNegative = Field(
+        0.25, description=("The curvature regulation never slows below this (nor above the desired speed) [m/s].")
+    )
+    approach_distance: Positive = Field(
+        0.6,
+        description=("Slow down in proportion to the distance to where the reference comes to rest, within this [m]."),
+    )
+    min_approach_speed: NonNegative = Field(0.05, description="Floor of the approach slow-down [m/s].")
+    rotate_to_heading: bool = Field(True, description="Rotate in place while the carrot is far off the heading.")
+    rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(
+        0.785, description=("Bearing of the carrot beyond which the robot rotates in place [rad].")
+    )
+    rotate_yaw_rate: Positive = Field(1.8, description="Yaw rate of the rotation in place [rad/s].")
+    search_horizon: Positive = Field(
+        5.0,
+        description=(
+            "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."
+        ),
+    )
+    search_samples: int = Field(50, ge=2, le=1000, description="Segments of that search (linear between samples).")
+    max_velocity: Positive = Field(2.0, description="Clamp on v_c [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c|, by slowing down on the same arc [rad/s].")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RegulatedPurePursuitConfig:
+        if self.min_lookahead > self.max_lookahead:
+            raise FieldError(
+                "min_lookahead", f"{self.min_lookahead:g} m exceeds max_lookahead ({self.max_lookahead:g} m)"
+            )
+        if self.rotate_yaw_rate > self.max_yaw_rate:
+            raise FieldError(
+                "rotate_yaw_rate", f"{self.rotate_yaw_rate:g} rad/s exceeds max_yaw_rate ({self.max_yaw_rate:g} rad/s)"
+            )
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> Cascade:
+        """The controller searching ``trajectory`` for its carrot; ``key`` is unused (nothing is drawn)."""
+        outer = RegulatedPurePursuit(
+            trajectory=trajectory,
+            lookahead_time=self.lookahead_time,
+            min_lookahead=self.min_lookahead,
+            max_lookahead=self.max_lookahead,
+            pace_gain=self.pace_gain,
+            min_radius=self.min_radius,
+            min_regulated_speed=self.min_regulated_speed,
+            approach_distance=self.approach_distance,
+            min_approach_speed=self.min_approach_speed,
+            rotate_min_angle=self.rotate_min_angle,
+            rotate_yaw_rate=self.rotate_yaw_rate,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            search_horizon=self.search_horizon,
+            search_samples=self.search_samples,
+            rotate_to_heading=self.rotate_to_heading,
+        )
+        # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
+
+class AdaptiveBacksteppingConfig(_Section):
+    """Kanayama backstepping over computed torque that estimates m, I_C (and b_w) online (Fukao et al. 2000)."""
+
+    kind: Literal["adaptive_backstepping"]
+    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
+    kc: tuple[Positive, Positive] = Field(
+        (10.0, 10.0),
+        description=("K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."),
+    )
+    adaptation_gain: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (500.0, 5.0, 1e-4),
+        description=(
+            "Gamma of the estimates of (m [kg s^2/m^2], I_C [kg m^2 s^2], viscous friction b_w [kg m^2]); "
+            "0 freezes that estimate at the [robot] value."
+        ),
+    )
+    estimate_range: tuple[Positive, Positive] = Field(
+        (0.5, 2.0), description=("Projection bounds of the m and I_C estimates, as multiples of the [robot] values.")
+    )
+    max_friction: NonNegative = Field(
+        0.05,
+        description=(
+            "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."
+        ),
+    )
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term to the torque law.")
+
+    @model_validator(mode="after")
+    def _range_holds_the_nominal(self) -> AdaptiveBacksteppingConfig:
+        low, high = self.estimate_range
+        if not low <= 1.0 <= high or low == high:
+            raise FieldError(
+                "estimate_range",
+                f"{list(self.estimate_range)} must satisfy low <= 1 <= high, "
+                "low < high (the estimates start at the [robot] values); e.g. [0.5, 2.0]",
+            )
+        return self
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` is unused (nothing is drawn)."""
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(
+            kx=kx,
+            ky=ky,
+            ktheta=ktheta,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            strict=self.strict,
+        )
+        low, high = self.estimate_range
+        inner = AdaptiveComputedTorque(
+            nominal,
+            kc=self.kc,
+            gamma=self.adaptation_gain,
+            control_period=control_period,
+            lower=(low * nominal.mass, low * nominal.inertia, 0.0),
+            upper=(high * nominal.mass, high * nominal.inertia, max(self.max_friction, nominal.viscous_friction)),
+        )
+        return Cascade(outer, inner)
+
+
+class MPPIConfig(_Section):
+    """Model predictive path integral control of the wheel torques on the nominal model (Williams et al. 2017)."""
+
+    kind: Literal["mppi"]
+    samples: int = Field(64, ge=1, le=10_000, description="K: torque sequences sampled per control period.")
+    horizon: int = Field(20, ge=1, le=500, description="H: steps per sequence.")
+    model_step: Positive = Field(
+        0.05,
+        le=10.0,
+        description=("dt: how long each step of a sequence holds its torque, and the rollout's Euler step [s]."),
+    )
+    temperature: Positive = Field(
+        1.0,
+        description=(
+            "lambda of the weights exp(-(S - min S) / lambda), in cost units: lower trusts the best samples more."
+        ),
+    )
+    noise_std: tuple[Positive, Positive] = Field(
+        (0.2, 0.2), description=("sigma of the sampled torque perturbations, [right, left] wheel [N m].")
+    )
+    position_weight: NonNegative = Field(100.0, description="q_p of the squared position error, per step [1/m^2].")
+    heading_weight: NonNegative = Field(1.0, description="q_th of the squared heading error, per step [1/rad^2].")
+    velocity_weight: NonNegative = Field(1.0, description=("q_nu of |nu - nu_r|^2, per step [s^2/m^2 and s^2/rad^2]."))
+    effort_weight: NonNegative = Field(0.01, description="r of the squared wheel torques, per step [1/(N m)^2].")
+    terminal_weight: NonNegative = Field(
+        10.0, description=("q_T: the last step's position and heading terms count again, times this.")
+    )
+    limit_weight: NonNegative = Field(
+        1000.0,
+        description=("q_lim of the squared excess of |v| over max_velocity and |omega| over max_yaw_rate, per step."),
+    )
+    max_velocity: Positive = Field(2.0, description="Soft limit on |v| of the rollouts [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Soft limit on |omega| of the rollouts [rad/s].")
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> MPPI:
+        """The controller previewing ``trajectory``; it samples with the key the simulator hands to ``init``,
+        so ``key`` is unused."""
+        cost = MPPICost(
+            position=self.position_weight,
+            heading=self.heading_weight,
+            velocity=self.velocity_weight,
+            effort=self.effort_weight,
+            terminal=self.terminal_weight,
+            limit=self.limit_weight,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+        )
+        return MPPI(
+            nominal,
+            trajectory,
+            cost=cost,
+            model_step=self.model_step,
+            control_period=control_period,
+            temperature=self.temperature,
+            noise_std=self.noise_std,
+            samples=self.samples,
+            horizon=self.horizon,
+        )
+
+
+ControllerConfig = Annotated[
+    BacksteppingConfig
+    | NNAdaptiveConfig
+    | LTVLQRConfig
+    | SlidingModeConfig
+    | KinematicBacksteppingConfig
+    | RegulatedPurePursuitConfig
+    | AdaptiveBacksteppingConfig
+    | MPPIConfig,
+    Field(discriminator="kind"),
+]
+
+#: the controllers whose outer law is Kanayama's, so that they have gains (Kx, Ky, Ktheta)
+KanayamaControllerConfig = (
+    BacksteppingConfig | NNAdaptiveConfig | SlidingModeConfig | KinematicBacksteppingConfig | AdaptiveBacksteppingConfig
+)
+
+
+def kanayama_gains(config: ControllerConfig) -> tuple[float, float, float]:
+    """(Kx, Ky, Ktheta) of a controller with Kanayama's outer law; a ConfigError naming ``controller.kind`` if not."""
+    if isinstance(config, KanayamaControllerConfig):
+        return config.gains
+    raise ConfigError("controller.kind", f"'{config.kind}' has no Kanayama gains (Kx, Ky, Ktheta)")

@@ -1,0 +1,89 @@
+"""From a validated scenario to the simulator's objects (:class:`Setup`), and back to TOML."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from ..controllers import (
+    Controller,
+)
+from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, RobotParams, WheelDisturbance
+from ..trajectories import Trajectory
+from .baseline_configs import (
+    KinematicBacksteppingConfig,
+    MPPIConfig,
+    RegulatedPurePursuitConfig,
+)
+from .document import Scenario
+
+# --- runtime objects -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Everything :func:`ddtrack.sim.simulate` needs, built from a scenario (randomness not yet drawn)."""
+
+    nominal: RobotParams
+    plant_params: RobotParams
+    controller: Any
+    trajectory: Trajectory
+    x0: jax.Array
+    disturbance: WheelDisturbance
+    noise: MeasurementNoise
+    identification: Any = None  #: the emulator's identification, for controllers that have one
+    kinematic: bool = False  #: the controller drives the unicycle with ideal velocity tracking
+
+    @property
+    def plant(self) -> DynamicPlant | KinematicPlant:
+        """What the run simulates: the true robot (``plant_params``), or for a kinematic controller the
+        unicycle that applies (v, omega) at once (its [plant], [randomize] and [disturbance] have no effect)."""
+        return KinematicPlant() if self.kinematic else DynamicPlant(self.plant_params)
+
+
+def build(
+    scenario: Scenario, plant_params: RobotParams | None = None, controller_key: jax.Array | None = None
+) -> Setup:
+    """Build the runtime objects; ``plant_params`` replaces the plant (e.g. a random draw) and
+    ``controller_key`` seeds the controller's construction (e.g. the emulator's initial weights)."""
+    nominal = scenario.robot.params()
+    sim = scenario.simulation
+    trajectory = scenario.trajectory.build()
+    if scenario.initial.pose is None:
+        ref0 = trajectory(0.0)
+        pose = (float(ref0.x), float(ref0.y), float(ref0.theta))
+    else:
+        pose = scenario.initial.pose
+    x0 = jnp.asarray([*pose, *scenario.initial.velocity], dtype=float)
+    config, key = scenario.controller, controller_key if controller_key is not None else jax.random.PRNGKey(0)
+    controller: Controller
+    if isinstance(config, (RegulatedPurePursuitConfig, MPPIConfig)):  # they look ahead along the reference itself
+        controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
+    else:
+        controller = config.build(nominal, sim.control_period, key)
+    return Setup(
+        nominal=nominal,
+        plant_params=plant_params if plant_params is not None else scenario.plant_params(),
+        controller=controller,
+        trajectory=trajectory,
+        x0=x0,
+        disturbance=scenario.disturbance.build(),
+        noise=scenario.noise.build(),
+        kinematic=isinstance(config, KinematicBacksteppingConfig),
+    )
+
+
+def to_toml_dict(scenario: Scenario) -> dict[str, Any]:
+    """The fully resolved scenario (defaults included, no None values) as a TOML-ready dict."""
+    return _drop_none(scenario.model_dump(mode="json"))
+
+
+def _drop_none(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list):
+        return [_drop_none(v) for v in value]
+    return value

@@ -1,0 +1,239 @@
+"""The ``[controller]`` section of the velocity-level controllers over the shared inner loop: Kanayama backstepping
+and the paper's NN-adaptive backstepping.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+import jax
+import jax.numpy as jnp
+from pydantic import Field, model_validator
+
+from ..controllers import (
+    Backstepping,
+    Cascade,
+    ComputedTorque,
+    Emulator,
+    NNAdaptiveBackstepping,
+    WheelPD,
+    emulator_scales,
+    init_mlp,
+    one_step_coefficient,
+)
+from ..identification import identification_scale
+from ..model import DynamicPlant, RobotParams
+from ..sim import NominalPeriod
+from ._base import (
+    FieldError,
+    NonNegative,
+    Positive,
+    _Section,
+)
+
+# --- [controller] -------------------------------------------------------------------------------
+
+
+class _InnerLoopConfig(_Section):
+    """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md).
+
+    The inner loop is computed torque (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level
+    controller meets the same dynamics layer.
+    """
+
+    kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
+    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
+    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
+    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
+
+    def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
+        """The inner loop on the ``nominal`` model, sampled every ``control_period`` [s]."""
+        if self.inner == "computed_torque":
+            return ComputedTorque(nominal, kc=self.kc)
+        return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
+
+    def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
+        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6)."""
+        if self.inner == "computed_torque":
+            return self.kc
+        r2 = nominal.wheel_radius**2
+        return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
+
+
+class _KanayamaConfig(_InnerLoopConfig):
+    """The keys of Kanayama's law (paper eq. 12), shared by backstepping and its NN-adaptive form."""
+
+    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
+
+    @model_validator(mode="after")
+    def _strict_needs_computed_torque(self) -> _KanayamaConfig:
+        if self.strict and self.inner != "computed_torque":
+            raise FieldError("strict", 'strict = true needs inner = "computed_torque" (the cross term enters eq. 11)')
+        return self
+
+
+class BacksteppingConfig(_KanayamaConfig):
+    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+
+    kind: Literal["backstepping"]
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
+        kx, ky, ktheta = self.gains
+        outer = Backstepping(
+            kx=kx,
+            ky=ky,
+            ktheta=ktheta,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            strict=self.strict,
+        )
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
+
+PositiveTriple = tuple[Positive, Positive, Positive]
+
+
+class NNAdaptiveConfig(_KanayamaConfig):
+    """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (model.md §3)."""
+
+    kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
+    rates: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (200.0, 200.0, 200.0),
+        description=("Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."),
+    )
+    gain_momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.0, description="beta_K, momentum of the gains.")
+    max_step: PositiveTriple = Field((0.05, 5.0, 0.5), description="Largest gain change per control period.")
+    gain_min: PositiveTriple = Field((0.1, 1.0, 0.1), description="Lower gain bounds (Kx, Ky, Ktheta).")
+    gain_max: PositiveTriple = Field((10.0, 600.0, 60.0), description="Upper gain bounds (Kx, Ky, Ktheta).")
+    gate_error: Positive = Field(0.5, description="Gains adapt only while e_tr is below this [m].")
+    leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
+    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (1.0, 50.0, 1.0), description=("Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta).")
+    )
+    jacobian: Literal["network", "analytic", "quasi_static", "model", "model_sensitivity"] = Field(
+        "network",
+        description=(
+            "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
+            "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."
+        ),
+    )
+    error_jacobian: Literal["exact", "paper"] = Field(
+        "exact", description=("d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e.")
+    )
+    emulator: Literal["E1", "E0"] = Field(
+        "E1", description=("E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c).")
+    )
+    hidden_units: int = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
+    learning_rate: Positive = Field(0.2, description="Emulator backpropagation rate eta.")
+    momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.3, description="Emulator momentum beta.")
+    gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
+    online_learning: bool = Field(True, description="Train the emulator on every new sample.")
+    learn_saturated: bool = Field(
+        False,
+        description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
+    )
+    structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
+    identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
+    identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
+    epochs: int = Field(100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data.")
+    identification_speed: tuple[Positive, Positive] | None = Field(
+        None,
+        description=(
+            "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
+            "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."
+        ),
+    )
+    dither: tuple[NonNegative, NonNegative] | None = Field(
+        None,
+        description=(
+            "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
+            "(0.05, 0.1) scaled like the identification reference."
+        ),
+    )
+    freeze_time: NonNegative | None = Field(
+        None, description=("No gain change before this time [s]; default 0 with identification, 2 without.")
+    )
+
+    @model_validator(mode="after")
+    def _gains_inside_bounds(self) -> NNAdaptiveConfig:
+        for name, low, gain, high in zip(("Kx", "Ky", "Ktheta"), self.gain_min, self.gains, self.gain_max, strict=True):
+            if not low <= gain <= high:
+                raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
+        if self.identification_speed is not None:  # identification data taken against a clamp teaches nothing
+            (v, w), (v_max, w_max) = self.identification_speed, (self.max_velocity, self.max_yaw_rate)
+            if v > v_max or w > w_max:
+                raise FieldError(
+                    "identification_speed",
+                    f"[{v:g}, {w:g}] exceeds the clamps max_velocity = "
+                    f"{v_max:g} m/s, max_yaw_rate = {w_max:g} rad/s; keep each below about 80 % "
+                    "of its clamp",
+                )
+        return self
+
+    def identification_scale(self) -> tuple[float, float]:
+        """(k_v, k_omega) of the identification reference, dither and emulator scales; (1, 1) for the paper's robot."""
+        return identification_scale(self.max_velocity, self.max_yaw_rate, self.identification_speed)
+
+    def identification_dither(self) -> tuple[float, float]:
+        """The dither's (sigma_v, sigma_omega): given, or the paper's (0.05, 0.1) scaled like the reference."""
+        k_v, k_w = self.identification_scale()
+        return self.dither if self.dither is not None else (0.05 * k_v, 0.1 * k_w)
+
+    def _nominal_period(self, nominal: RobotParams, control_period: float) -> NominalPeriod | None:
+        """One period of the nominal model under the inner loop, RK4 steps of at most 1 ms (the "model" Jacobians)."""
+        if not self.jacobian.startswith("model"):
+            return None
+        return NominalPeriod(
+            DynamicPlant(nominal),
+            self.build_inner(nominal, control_period),
+            control_period,
+            substeps=max(1, math.ceil(control_period / 1e-3 - 1e-9)),
+        )
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+        """The controller with a freshly initialised emulator (its identification is done by the runner)."""
+        uses_velocity = self.emulator == "E1"
+        k_v, k_w = self.identification_scale()  # the emulator's range is the identification's
+        emulator = Emulator(
+            init_mlp(key, 4 if uses_velocity else 2, self.hidden_units, 3),
+            emulator_scales(
+                control_period, uses_velocity=uses_velocity, max_velocity=k_v * 1.0, max_yaw_rate=k_w * 2.0
+            ),
+            uses_velocity,
+        )
+        bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
+        freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
+        outer = NNAdaptiveBackstepping(
+            gains=self.gains,
+            emulator=emulator,
+            control_period=control_period,
+            analytic_coefficients=one_step_coefficient(bandwidth, control_period),
+            rates=self.rates,
+            gain_momentum=self.gain_momentum,
+            max_step=self.max_step,
+            gain_min=self.gain_min,
+            gain_max=self.gain_max,
+            gate_error=self.gate_error,
+            leakage=self.leakage,
+            gamma=self.gamma,
+            learning_rate=self.learning_rate,
+            momentum=self.momentum,
+            clip_norm=self.gradient_clip,
+            freeze_time=freeze,
+            max_velocity=self.max_velocity,
+            max_yaw_rate=self.max_yaw_rate,
+            jacobian=self.jacobian,
+            error_jacobian=self.error_jacobian,
+            online_learning=self.online_learning,
+            learn_saturated=self.learn_saturated,
+            structured_jacobian=self.structured_jacobian,
+            strict=self.strict,
+            nominal_period=self._nominal_period(nominal, control_period),
+        )
+        return Cascade(outer, self.build_inner(nominal, control_period))

@@ -1,0 +1,111 @@
+"""The whole scenario document, and the registries of the kinds it accepts (what ``ddtrack list`` shows)."""
+
+from __future__ import annotations
+
+import typing
+from typing import Annotated, Any
+
+from pydantic import BaseModel, Field, model_validator
+
+from ..model import RobotParams
+from ._base import (
+    FieldError,
+    _Section,
+)
+from .baseline_configs import (
+    ControllerConfig,
+)
+from .controller_configs import BacksteppingConfig
+from .sections import (
+    DisturbanceConfig,
+    InitialConfig,
+    NoDisturbance,
+    NoiseConfig,
+    PlantConfig,
+    RandomizeConfig,
+    RobotConfig,
+    SimulationConfig,
+)
+from .trajectory_configs import (
+    TrajectoryConfig,
+)
+
+# --- the scenario --------------------------------------------------------------------------------
+
+
+class Scenario(_Section):
+    """A whole scenario file (docs/guide.md).
+
+    Every key, its unit, default and bounds: ``docs/reference.md`` (``ddtrack schema``).
+
+    Attributes
+    ----------
+    name : str
+        Name of the scenario; the default run folder is ``runs/NAME``.
+    description : str
+        Free text.
+    simulation, robot, plant, randomize, disturbance, noise, trajectory, initial, controller
+        The file's sections: the run's timing and seed, the nominal robot the controller believes in, the true
+        plant, its random draws, the wheel-torque disturbance, the measurement noise, the reference, the
+        initial state and the controller.
+    """
+
+    name: str = Field(min_length=1, max_length=200, description="Name of the scenario.")
+    description: str = Field("", max_length=10_000, description="Free text.")
+    simulation: SimulationConfig = SimulationConfig()
+    robot: RobotConfig = RobotConfig()
+    plant: PlantConfig = PlantConfig()
+    randomize: RandomizeConfig = RandomizeConfig()
+    disturbance: DisturbanceConfig = NoDisturbance()
+    noise: NoiseConfig = NoiseConfig()
+    trajectory: TrajectoryConfig
+    initial: InitialConfig = InitialConfig()
+    controller: ControllerConfig = BacksteppingConfig(kind="backstepping")
+
+    @model_validator(mode="after")
+    def _draws_keep_parameters_physical(self) -> Scenario:
+        plant = self.plant_params()
+        for field, draw in self.randomize:
+            if draw is None or field == "com_offset":
+                continue
+            value = getattr(plant, field)
+            low = value * (1 - draw.reach) if draw.relative is not None else value - draw.reach
+            must_be_positive = field in ("mass", "inertia", "wheel_radius", "half_axle")
+            if low <= 0.0 if must_be_positive else low < 0.0:
+                raise FieldError(
+                    f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); use a smaller spread"
+                )
+        return self
+
+    def divergence_distance(self) -> float:
+        """``simulation.divergence_error``, or the bound that scales with the scenario
+        (:func:`ddtrack.feasibility.divergence_bound`) [m]."""
+        if self.simulation.divergence_error is not None:
+            return self.simulation.divergence_error
+        from ..feasibility import divergence_bound
+
+        return divergence_bound(self)
+
+    def plant_params(self) -> RobotParams:
+        """The true plant's nominal values: [plant] over [robot]."""
+        true = self.plant.model_dump(exclude={"floor_friction"})  # the floor is not the robot's
+        merged = self.robot.model_dump() | {k: v for k, v in true.items() if v is not None}
+        return RobotParams(**merged)
+
+
+# --- registries (what `ddtrack list` shows) -------------------------------------------------------
+
+
+def _registry(union: Any) -> dict[str, type[BaseModel]]:
+    members = typing.get_args(typing.get_args(union)[0]) if typing.get_origin(union) is Annotated else (union,)
+    return {typing.get_args(m.model_fields["kind"].annotation)[0]: m for m in members}
+
+
+TRAJECTORIES = _registry(TrajectoryConfig)
+DISTURBANCES = _registry(DisturbanceConfig)
+CONTROLLERS = _registry(ControllerConfig)
+
+
+def summary(model: type[BaseModel]) -> str:
+    """First line of a config model's docstring."""
+    return (model.__doc__ or "").strip().splitlines()[0]

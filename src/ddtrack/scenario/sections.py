@@ -1,0 +1,242 @@
+"""The scenario's plain sections: ``[simulation]``, ``[robot]``, ``[plant]``, ``[randomize]``, ``[disturbance]``,
+``[noise]`` and ``[initial]``.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from ..model import MeasurementNoise, RobotParams, WheelDisturbance
+from ._base import (
+    MAX_CONTROL_PERIODS,
+    MAX_SEED,
+    Coordinate,
+    FieldError,
+    NonNegative,
+    Pair,
+    Positive,
+    _Section,
+)
+
+# --- [simulation] -------------------------------------------------------------------------------
+
+
+class SimulationConfig(_Section):
+    """Timing of the run, its seed, and what its statistics cover."""
+
+    duration: Positive = Field(40.0, description="Length of the run [s].")
+    control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
+    substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
+    metric_window: Pair | None = Field(
+        None, description="[start, end] of the error statistics [s]; default the whole run."
+    )
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Seed of every random draw of the run.")
+    settling_threshold: Positive = Field(0.1, description="e_tr below which the run counts as settled [m].")
+    divergence_error: Positive | None = Field(
+        None,
+        description=(
+            "Tracking error at which a run is declared diverged [m]; default 3 (initial error + the reference's extent "
+            "+ 2 L), which scales with the scenario (91.5 m for the paper's line, 3.8 m for a Burger's 0.5 m circle)."
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SimulationConfig:
+        steps = self.duration / self.control_period
+        if steps > MAX_CONTROL_PERIODS:
+            raise FieldError(
+                "duration",
+                f"{self.duration:g} s at {self.control_period:g} s per period is "
+                f"{steps:.3g} control periods, over the limit of {MAX_CONTROL_PERIODS:,}; "
+                "shorten duration or lengthen control_period",
+            )
+        if abs(steps - round(steps)) > 1e-6 * steps or round(steps) < 1:
+            raise FieldError(
+                "duration",
+                f"{self.duration:g} s is not a whole number of control periods "
+                f"({self.control_period:g} s); choose a duration that is a multiple of it",
+            )
+        if self.metric_window is not None:
+            start, end = self.metric_window
+            if not 0.0 <= start < end <= self.duration + 1e-9:
+                raise FieldError(
+                    "metric_window",
+                    f"{list(self.metric_window)} must satisfy 0 <= start < end <= duration ({self.duration:g} s)",
+                )
+        return self
+
+    @property
+    def n_steps(self) -> int:
+        return round(self.duration / self.control_period)
+
+    @property
+    def window(self) -> Pair:
+        return self.metric_window if self.metric_window is not None else (0.0, self.duration)
+
+
+# --- [robot], [plant], [randomize] --------------------------------------------------------------
+
+
+class RobotConfig(_Section):
+    """The nominal model: what the controller believes."""
+
+    mass: Positive = Field(10.0, description="Total mass m [kg].")
+    inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
+    com_offset: float = Field(
+        0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass ahead of the axle [m]."
+    )
+    wheel_radius: Positive = Field(0.05, le=2.0, description="Wheel radius R [m].")
+    half_axle: Positive = Field(0.25, le=5.0, description="Half the wheel separation L [m].")
+    max_torque: Positive = Field(10.0, description="Torque limit per wheel [N m].")
+    viscous_friction: NonNegative = Field(0.0, description="Viscous wheel friction b_w [N m s/rad].")
+    coulomb_friction: NonNegative = Field(0.0, description="Coulomb wheel friction tau_c [N m].")
+    friction_smoothing: Positive = Field(0.01, description="tanh smoothing wheel speed eps_f [rad/s].")
+
+    def params(self) -> RobotParams:
+        return RobotParams(**self.model_dump())
+
+
+class PlantConfig(_Section):
+    """The true robot; every key left out takes the [robot] value."""
+
+    mass: Positive | None = Field(None, description="True total mass m [kg].")
+    inertia: Positive | None = Field(None, description="True yaw inertia about the centre of mass I_C [kg m^2].")
+    com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = Field(
+        None, description="True signed offset d of the centre of mass ahead of the axle [m]."
+    )
+    wheel_radius: Annotated[float, Field(gt=0.0, le=2.0)] | None = Field(None, description="True wheel radius R [m].")
+    half_axle: Annotated[float, Field(gt=0.0, le=5.0)] | None = Field(
+        None, description="True half wheel separation L [m]."
+    )
+    max_torque: Positive | None = Field(None, description="True torque limit per wheel [N m].")
+    viscous_friction: NonNegative | None = Field(None, description="True viscous wheel friction b_w [N m s/rad].")
+    coulomb_friction: NonNegative | None = Field(None, description="True Coulomb wheel friction tau_c [N m].")
+    friction_smoothing: Positive | None = Field(None, description="tanh smoothing wheel speed eps_f [rad/s].")
+    floor_friction: Positive = Field(
+        0.8,
+        le=3.0,
+        description=(
+            "Friction coefficient of the floor (tyre on floor, 0.3 to 1.0 indoors): a run that needs more grip is "
+            "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor)."
+        ),
+    )
+
+
+class ParameterDraw(_Section):
+    """A random plant parameter, drawn per run: value * (1 + r) (``relative``) or value + r (``absolute``),
+    r uniform on [-spread, spread] or normal with std = spread truncated at 3 std."""
+
+    distribution: Literal["uniform", "normal"] = Field(
+        "uniform", description=("r uniform on [-spread, spread], or normal with std = spread truncated at 3 std.")
+    )
+    relative: NonNegative | None = Field(None, description="Spread as a fraction of the value: value * (1 + r).")
+    absolute: NonNegative | None = Field(None, description="Spread in the parameter's unit: value + r.")
+
+    @model_validator(mode="after")
+    def _one_spread(self) -> ParameterDraw:
+        if (self.relative is None) == (self.absolute is None):
+            raise FieldError(
+                "relative", "give exactly one of 'relative' (fraction of the value) or 'absolute' (same unit)"
+            )
+        return self
+
+    @property
+    def reach(self) -> float:
+        """Largest possible |r|."""
+        spread = self.relative if self.relative is not None else self.absolute
+        assert spread is not None  # the validator above requires one of the two
+        return spread * (3.0 if self.distribution == "normal" else 1.0)
+
+
+class RandomizeConfig(_Section):
+    """Plant parameters drawn per run from the run's seed, each an inline table; left out: not drawn."""
+
+    mass: ParameterDraw | None = Field(None, description="Draw of the plant's mass [kg].")
+    inertia: ParameterDraw | None = Field(None, description="Draw of the plant's yaw inertia I_C [kg m^2].")
+    com_offset: ParameterDraw | None = Field(None, description="Draw of the plant's centre-of-mass offset d [m].")
+    wheel_radius: ParameterDraw | None = Field(None, description="Draw of the plant's wheel radius R [m].")
+    half_axle: ParameterDraw | None = Field(None, description="Draw of the plant's half axle L [m].")
+    viscous_friction: ParameterDraw | None = Field(
+        None, description=("Draw of the plant's viscous wheel friction b_w [N m s/rad].")
+    )
+    coulomb_friction: ParameterDraw | None = Field(
+        None, description=("Draw of the plant's Coulomb wheel friction tau_c [N m].")
+    )
+
+
+# --- [disturbance], [noise] ----------------------------------------------------------------------
+
+
+class NoDisturbance(_Section):
+    """No disturbance."""
+
+    kind: Literal["none"] = "none"
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance()
+
+
+class ConstantDisturbance(_Section):
+    """Constant wheel torques, opposing the drive when positive."""
+
+    kind: Literal["constant"]
+    torque: Pair = Field(description="[right, left] wheel torque [N m].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.torque)
+
+
+class SinusoidDisturbance(_Section):
+    """bias + amplitude * sin(frequency t + phase), per wheel (model.md §1.4's default)."""
+
+    kind: Literal["sinusoid"]
+    bias: Pair = Field((0.0, 0.0), description="[right, left] constant part [N m].")
+    amplitude: Pair = Field(description="[right, left] amplitude [N m].")
+    frequency: NonNegative = Field(description="Angular frequency [rad/s].")
+    phase: Pair = Field((0.0, 0.0), description="[right, left] phase [rad].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.bias, amplitude=self.amplitude, frequency=self.frequency, phase=self.phase)
+
+
+class GaussianDisturbance(_Section):
+    """Normal torques drawn from the run's seed and held over each control period."""
+
+    kind: Literal["gaussian"]
+    mean: Pair = Field((0.0, 0.0), description="[right, left] mean [N m].")
+    std: tuple[NonNegative, NonNegative] = Field(description="[right, left] standard deviation [N m].")
+
+    def build(self) -> WheelDisturbance:
+        return WheelDisturbance(bias=self.mean, std=self.std)
+
+
+DisturbanceConfig = Annotated[
+    NoDisturbance | ConstantDisturbance | SinusoidDisturbance | GaussianDisturbance, Field(discriminator="kind")
+]
+
+
+class NoiseConfig(_Section):
+    """Gaussian measurement noise on what the controller sees (the true state is recorded)."""
+
+    position_std: NonNegative = Field(0.0, description="On x and y [m].")
+    heading_std: NonNegative = Field(0.0, description="On theta [rad].")
+    velocity_std: NonNegative = Field(0.0, description="On v [m/s].")
+    yaw_rate_std: NonNegative = Field(0.0, description="On omega [rad/s].")
+
+    def build(self) -> MeasurementNoise:
+        p, h = self.position_std, self.heading_std
+        return MeasurementNoise(std=(p, p, h, self.velocity_std, self.yaw_rate_std))
+
+
+# --- [initial] -------------------------------------------------------------------------------
+
+
+class InitialConfig(_Section):
+    """The robot's state at t = 0."""
+
+    pose: tuple[Coordinate, Coordinate, float] | None = Field(
+        None, description="[x, y, theta] of the axle midpoint; default the reference pose at t = 0."
+    )
+    velocity: Pair = Field((0.0, 0.0), description="[v, omega] [m/s, rad/s].")
