@@ -1,0 +1,339 @@
+"""The ``ddtrack`` command (docs/guide.md). Exit codes: 0 success, 1 a run diverged, 2 usage or configuration error.
+
+User mistakes print one or two plain lines on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType
+
+import click
+
+from .._after_import import after_import
+from ..errors import ConfigError, RunError
+
+LISTS = ("controllers", "trajectories", "disturbances")
+
+overwrite_option = click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace another ddtrack command's output (or, for sweep and bench, another study) in --out, whole.",
+)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(package_name="ddtrack")
+def cli() -> None:
+    """Simulate, compare and tune trajectory-tracking controllers for differential-drive robots."""
+
+
+@cli.command(short_help="Simulate SCENARIO once and write a run folder.")
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option("--controller", "controller", metavar="NAME", help="Replace controller.kind (see `ddtrack list`).")
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="SECTION.KEY=VALUE",
+    help="Override a scenario value, e.g. --set robot.mass=12 (repeatable).",
+)
+@click.option("--seed", type=click.IntRange(min=0), help="Replace simulation.seed.")
+@click.option("--out", type=click.Path(path_type=Path), help="Run folder [default: runs/NAME].")
+@overwrite_option
+def run(
+    scenario: Path,
+    controller: str | None,
+    overrides: tuple[str, ...],
+    seed: int | None,
+    out: Path | None,
+    overwrite: bool,
+) -> int:
+    """Simulate SCENARIO once and write a run folder."""
+    from ..scenario import load_scenario
+
+    enable_compilation_cache()  # loading already compiles: the reference is sampled for the feasibility checks
+    spec = load_scenario(scenario, overrides=overrides, seed=seed, controller=controller)
+    folder = out if out is not None else Path("runs") / folder_name(spec.name)
+    from ..outdir import check_output, staged_folder
+
+    check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
+    from ..rundir import write_run
+    from ..runner import needs_identification, prepare, run_metrics, run_setup, traction_columns
+    from ..sim import remedy, timeseries
+
+    show = terminal_status()
+    show("identifying the robot: the NN emulator's pre-training run" if needs_identification(spec) else "preparing")
+    setup, draws = prepare(spec)
+    show(f"simulating {spec.simulation.duration:g} s")
+    result = run_setup(spec, setup, draws)
+    show("writing the run folder and its figures")
+    columns = timeseries(result)
+    columns |= traction_columns(setup.plant_params, columns)  # the grip the run needed, and its wheel speeds
+    sim = spec.simulation
+    nmse = None if setup.identification is None else setup.identification.nmse
+    metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
+    identification = None
+    if setup.identification is not None:
+        found = setup.identification
+        identification = {
+            "samples": int(found.samples),
+            "epochs": int(found.epoch_loss.shape[0]),
+            "epoch_loss": [float(v) for v in found.epoch_loss],
+            "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True)),
+        }
+    with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
+        write_run(stage, spec, columns, metrics, identification)
+    show("")
+    click.echo(
+        f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
+        f"{sim.duration:g} s -> {folder}"
+    )
+    if result.status_name != "ok":
+        click.echo(
+            f"run {result.status_name} at t = {result.failure_time:.2f} s: {remedy(result.status_name, columns)}",
+            err=True,
+        )
+        return 1
+    window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
+    settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant
+    from .._format import percent, significant
+
+    click.echo(
+        f"  e_tr over {window}: mean {significant(metrics['e_tr_mean'])} m, "
+        f"rms {significant(metrics['e_tr_rms'])} m, max {significant(metrics['e_tr_max'])} m, "
+        f"final {significant(metrics['e_tr_final'])} m"
+    )
+    click.echo(
+        f"  settling (e_tr < {sim.settling_threshold:g} m): "
+        f"{'never' if settle is None else f'{significant(settle)} s'}; "
+        f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
+        f"saturated {percent(metrics['saturation_fraction'])} of the time"
+    )
+    for warning in metrics["warnings"]:  # the numbers above may not mean what they seem: say why, on stderr
+        click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
+    return 0
+
+
+def terminal_status() -> Callable[[str], None]:
+    """A one-line status on stderr, rewritten in place, for the slow phases of a lone run (an NN identification
+    takes seconds); silent when stderr is not a terminal, so pipes, logs and tests see the plain output."""
+    if not sys.stderr.isatty():
+        return lambda text: None
+
+    def show(text: str) -> None:
+        click.echo(f"\r\033[K{text + ' ...' if text else ''}", err=True, nl=False)
+
+    return show
+
+
+def folder_name(name: str) -> str:
+    """``name`` as one safe folder name for the default ``runs/NAME``: every character other than a letter, a digit,
+    ``.``, ``_`` or ``-`` becomes ``_`` and leading dots go, so a scenario named ``../../etc`` or ``a/b`` cannot
+    make ``ddtrack run`` write outside ``runs/``."""
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", name).lstrip(".")
+    return safe or "run"
+
+
+@cli.command(short_help="Check SCENARIO without running it.")
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a value first.")
+def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
+    """Check SCENARIO without running it."""
+    from ..feasibility import check
+    from ..scenario import load_scenario
+
+    spec = load_scenario(scenario, overrides=overrides)
+    click.echo(
+        f"ok: {spec.name} ({spec.trajectory.kind}, {spec.controller.kind}, {spec.simulation.n_steps} control periods)"
+    )
+    for warning in check(spec):
+        click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
+    return 0
+
+
+@cli.command(name="list", short_help="List the controllers, trajectories and disturbances.")
+@click.argument("what", required=False, type=click.Choice(LISTS))
+def list_(what: str | None) -> int:
+    """List the controllers, trajectories and disturbances a scenario can name."""
+    from ..scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, summary
+
+    registries = {"controllers": CONTROLLERS, "trajectories": TRAJECTORIES, "disturbances": DISTURBANCES}
+    width = max(len(kind) for registry in registries.values() for kind in registry)
+    for name in [what] if what else LISTS:
+        click.echo(f"{name}:")
+        for kind, model in registries[name].items():
+            click.echo(f"  {kind:<{width}}  {summary(model)}")
+    return 0
+
+
+@cli.command(short_help="Animate a run folder: the robot following its reference.")
+@click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    metavar="FILE",
+    help="FILE.gif (Pillow) or FILE.mp4 (needs ffmpeg on PATH) [default: DIR/animation.gif].",
+)
+@click.option(
+    "--fps", type=click.IntRange(min=1, max=50), default=20, show_default=True, help="Frames per second of playback."
+)
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0.01, max=1000.0),
+    default=2.0,
+    show_default=True,
+    help="Simulated seconds per second of playback (1 = real time).",
+)
+def animate(folder: Path, out: Path | None, fps: int, speed: float) -> int:
+    """Animate the run folder DIR (from `ddtrack run`): the robot's footprint following the reference with its
+    trail, and the adapted gains beside it when they moved. At most 600 frames: a longer run plays faster."""
+    from ..animation import animate as write_animation
+    from ..animation import read_run
+    from ..outdir import check_writable
+
+    columns, spec = read_run(folder)
+    out = out if out is not None else folder / "animation.gif"
+    check_writable(out.parent)
+    plant = spec.plant_params()  # the true robot's geometry
+    info = write_animation(
+        columns,
+        out,
+        half_axle=plant.half_axle,
+        wheel_radius=plant.wheel_radius,
+        fps=fps,
+        speed=speed,
+        title=f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}",
+    )
+    click.echo(f"wrote {out}: {info.frames} frames at {fps} fps, {info.speed:.3g} x real time")
+    return 0
+
+
+@cli.command(short_help="Print the JSON Schema (or Markdown reference) of scenario files.")
+@click.option("--markdown", is_flag=True, help="Print the Markdown reference (docs/reference.md) instead.")
+def schema(markdown: bool) -> int:
+    """Print the JSON Schema of scenario files (every key, its type, default, bounds and unit)."""
+    import json
+
+    from ..schema import scenario_schema, schema_markdown
+
+    click.echo(schema_markdown() if markdown else json.dumps(scenario_schema(), indent=2), nl=not markdown)
+    return 0
+
+
+@cli.command(short_help="Write a self-contained HTML report of a result folder.")
+@click.argument("folder", metavar="DIR", type=click.Path(path_type=Path))
+@click.option(
+    "--out", type=click.Path(path_type=Path), metavar="FILE", help="The HTML file [default: DIR/report.html]."
+)
+def report(folder: Path, out: Path | None) -> int:
+    """Write one self-contained HTML page (inline CSS and SVG; no script, no external resource: it opens
+    offline) for a run, reproduce, mc or bench folder DIR: the scenario, the metrics, the figures, the gains, and
+    for mc and bench the distributions."""
+    from ..report import write_report
+
+    click.echo(f"wrote {write_report(folder, out=out)}")
+    return 0
+
+
+@contextmanager
+def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
+    """A rich progress bar on stderr, yielding ``advance(completed, label=None)``; silent when stderr is not a
+    terminal, so logs, pipes and CI stay clean."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    console = Console(stderr=True)
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
+        console=console,
+        disable=not console.is_terminal,
+    ) as bar:
+        task = bar.add_task(label, total=total)
+
+        def advance(completed: int, description: str | None = None, total: int | None = None) -> None:
+            if total is not None:
+                bar.update(task, total=total)
+            bar.update(task, completed=completed, description=description or label)
+
+        yield advance
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
+    try:
+        code = cli.main(args=list(argv) if argv is not None else None, prog_name="ddtrack", standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        return exc.exit_code
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        return 130
+    except ConfigError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    except RunError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    return code if isinstance(code, int) else 0
+
+
+def enable_compilation_cache() -> None:
+    """JAX's persistent compilation cache, imported only by the commands that simulate."""
+    from ..runner import enable_compilation_cache as enable
+
+    enable()
+
+
+def one_device_per_core(jax: ModuleType) -> None:
+    """One JAX CPU device per usable core (called once JAX is imported)."""
+    jax.config.update(
+        "jax_num_cpu_devices", len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    )
+
+
+def entry_point() -> None:
+    """Console-script entry point. The ``ddtrack`` process gives JAX one CPU device per core, so that ``mc``
+    batches split over the cores (``runner.shard_runs``); in-process callers of :func:`main` keep their own.
+    JAX is imported only when a command needs it, so ``--help`` starts fast."""
+    after_import("jax", one_device_per_core)
+    code = main()
+    if "distributed" not in sys.modules:  # Dask's exit hooks stop worker processes: let those run
+        exit_now(code)
+    sys.exit(code)
+
+
+def exit_now(code: int) -> None:
+    """Exit without the interpreter's teardown (0.3 s of JAX and Matplotlib clean-up that keeps nothing): every
+    file is written, fsynced and closed by then; the standard streams and the log are flushed here."""
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: nothing more can reach it
+            pass
+    os._exit(code)
+
+
+from . import studies as _studies  # noqa: E402, F401  (registers reproduce, mc, tune, sweep and bench)
