@@ -724,8 +724,8 @@ class ClusterStarted(Exception):
 
 @contextlib.contextmanager
 def no_cluster() -> Iterator[None]:
-    """Replace ``ddtrack.cli.dask_client`` with a stub that raises :class:`ClusterStarted`."""
-    from ddtrack import cli
+    """Replace the sweep command's ``dask_client`` with a stub that raises :class:`ClusterStarted`."""
+    from ddtrack.cli import studies as cli
 
     def stub(*args: Any, **kwargs: Any) -> Any:
         raise ClusterStarted
