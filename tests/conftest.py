@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+os.environ.setdefault("MPLBACKEND", "Agg")  # headless, as the ddtrack command draws (set before Matplotlib loads)
 
 import ddtrack  # noqa: F401  (turns on float64 before any test builds an array)
 from ddtrack.cli import main

@@ -166,3 +166,24 @@ def test_mp4_through_ffmpeg(short_run, tmp_path, cli):
     head = (tmp_path / "run.mp4").read_bytes()[:12]
     assert head[4:8] == b"ftyp"  # an MP4 container
     assert [p.name for p in tmp_path.iterdir()] == ["run.mp4"]
+
+
+def test_importing_ddtrack_leaves_matplotlib_s_backend_alone(short_run, tmp_path):
+    """A notebook or a GUI keeps its backend: importing the plotting and animation modules changes nothing, and an
+    animation still renders (on an Agg canvas of its own) under a backend that cannot blit (here: svg)."""
+    import subprocess
+    import sys
+
+    script = (
+        "import matplotlib; matplotlib.use('svg')\n"
+        "import ddtrack.plotting, ddtrack.animation\n"
+        "from ddtrack.animation import animate, read_run\n"
+        "assert matplotlib.get_backend() == 'svg', matplotlib.get_backend()\n"
+        f"columns, _ = read_run({str(short_run)!r})\n"
+        f"info = animate(columns, {str(tmp_path / 'svg.gif')!r}, half_axle=0.25, wheel_radius=0.05, fps=1, speed=1.0)\n"
+        "assert matplotlib.get_backend() == 'svg'\n"
+        "print(info.frames)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert int(done.stdout.strip()) == 5 and len(frames(tmp_path / "svg.gif")) == 5

@@ -1,15 +1,14 @@
 """Figures of a run, from its time-series columns (:func:`ddtrack.sim.timeseries` or a Parquet file).
 
-Every function takes ``ax``/``axes=None``, returns the figure and never calls ``show()``.
+Every function takes ``ax``/``axes=None``, returns the figure and never calls ``show()``. Importing this module
+leaves Matplotlib's backend alone (a notebook keeps its inline one); the ``ddtrack`` command draws headless
+(``MPLBACKEND=Agg`` unless you set another).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-import matplotlib
-
-matplotlib.use("Agg")  # headless by default; a user's explicit backend choice before import still wins
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes

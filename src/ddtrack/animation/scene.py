@@ -8,15 +8,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")  # headless by default, as in plotting
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
 from .._format import significant
@@ -244,8 +242,8 @@ class _Robot:
         self.wheels = [Polygon(zero, closed=True, zorder=5, **wheel_style) for _ in range(2)]
         for patch in (self.body, *self.wheels):
             ax.add_patch(patch)
-        self.arrow = None if outline else ax.add_line(plt.Line2D([], [], color=color, lw=1.6, zorder=6))
-        self.tip = None if outline else ax.add_line(plt.Line2D([], [], marker=(3, 0, 0), ms=6, color=color, zorder=6))
+        self.arrow = None if outline else ax.add_line(Line2D([], [], color=color, lw=1.6, zorder=6))
+        self.tip = None if outline else ax.add_line(Line2D([], [], marker=(3, 0, 0), ms=6, color=color, zorder=6))
 
     def place(self, x: float, y: float, theta: float) -> None:
         shape = footprint(x, y, theta, **self.geometry)
@@ -278,9 +276,9 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
     t = c["t"]
     with_gains = gains_moved(c)
     x_lim, y_lim = _limits(c, margin=2.5 * half_axle)
-    fig = plt.figure(
-        figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi, layout="constrained"
-    )
+    # a figure of its own on an Agg canvas, outside pyplot: blitting needs Agg, whatever the user's backend
+    fig = Figure(figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi, layout="constrained")
+    FigureCanvasAgg(fig)
     if with_gains:
         grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1.0))
         ax = fig.add_subplot(grid[:, 0])

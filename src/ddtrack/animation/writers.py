@@ -9,7 +9,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.animation import FFMpegWriter, PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -159,32 +158,29 @@ def animate(
         )
     rows, played = frame_indices(np.asarray(columns["t"], float), fps=fps, speed=speed, max_frames=max_frames)
     scene = _scene(columns, half_axle=half_axle, wheel_radius=wheel_radius, title=title, zoom=zoom, dpi=dpi)
-    try:
-        if suffix == ".gif":
-            blitter = _Blitter(scene)
-            # the last frame holds every colour the others use (the whole path, the gains)
-            palette = blitter.frame(int(rows[-1])).quantize(colors=256, method=Image.Quantize.MEDIANCUT)
-            gif = _BlitPillowWriter(fps=fps, palette=palette)
+    if suffix == ".gif":
+        blitter = _Blitter(scene)
+        # the last frame holds every colour the others use (the whole path, the gains)
+        palette = blitter.frame(int(rows[-1])).quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+        gif = _BlitPillowWriter(fps=fps, palette=palette)
 
-            def render(path: Path) -> None:
-                with gif.saving(scene.fig, str(path), dpi):
-                    for row in rows:
-                        gif.image = blitter.frame(int(row))
-                        gif.grab_frame()
-        else:
-            writer = FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])  # type: ignore[arg-type]  # as above
+        def render(path: Path) -> None:
+            with gif.saving(scene.fig, str(path), dpi):
+                for row in rows:
+                    gif.image = blitter.frame(int(row))
+                    gif.grab_frame()
+    else:
+        writer = FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])  # type: ignore[arg-type]  # as above
 
-            def render(path: Path) -> None:
-                scene.fig.canvas.draw()
-                scene.fig.set_layout_engine("none")  # the same layout in every frame
-                with writer.saving(scene.fig, str(path), dpi):
-                    for row in rows:
-                        scene.draw(int(row))
-                        writer.grab_frame()
+        def render(path: Path) -> None:
+            scene.fig.canvas.draw()
+            scene.fig.set_layout_engine("none")  # the same layout in every frame
+            with writer.saving(scene.fig, str(path), dpi):
+                for row in rows:
+                    scene.draw(int(row))
+                    writer.grab_frame()
 
-        _write_atomically(out, render)
-    finally:
-        plt.close(scene.fig)
+    _write_atomically(out, render)  # the figure is not pyplot's: nothing to close
     return AnimationInfo(path=out, frames=int(rows.size), fps=float(fps), speed=float(played))
 
 

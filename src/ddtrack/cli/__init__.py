@@ -278,6 +278,7 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
+    os.environ.setdefault("MPLBACKEND", "Agg")  # commands write figures to files and never show them
     try:
         code = cli.main(args=list(argv) if argv is not None else None, prog_name="ddtrack", standalone_mode=False)
     except click.exceptions.Exit as exc:
