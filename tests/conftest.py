@@ -35,10 +35,9 @@ def no_persistent_cache_in_this_process():
     tests that start ``ddtrack`` as a subprocess (test_readme, test_nothing_lost, ...) still use the cache."""
     import ddtrack.cli
     import ddtrack.cli.studies
-    import ddtrack.sweep
 
     with pytest.MonkeyPatch.context() as patch:
-        for module in (ddtrack.cli, ddtrack.cli.studies, ddtrack.sweep):
+        for module in (ddtrack.cli, ddtrack.cli.studies):
             patch.setattr(module, "enable_compilation_cache", lambda: None)
         yield
 

@@ -407,6 +407,12 @@ def test_random_sweep_on_a_real_cluster_by_address(tmp_path):
             timeout=300,
         )
         assert result.returncode == 0, result.stderr
+        with cluster.client() as client:  # the driver set the compile cache on the workers, as a plugin, not a task
+            caches = client.run(lambda: __import__("jax").config.jax_compilation_cache_dir)
+            assert caches and all(str(path).endswith("jax") for path in caches.values()), caches
+            assert "ddtrack-compilation-cache" in client.run_on_scheduler(
+                lambda dask_scheduler: list(dask_scheduler.worker_plugins)
+            )
     finally:
         cluster.close()
     records = read_records(out)

@@ -34,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from .errors import ConfigError, did_you_mean
 from .metrics import warning_counts
 from .outdir import atomic_write
-from .runner import enable_compilation_cache, monte_carlo
+from .runner import monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
 
 RECORDS = "records"
@@ -270,7 +270,6 @@ def run_chunk(
 ) -> list[dict]:
     """The task: simulate ``runs`` ((key, seed) pairs, at most ``chunk``) as one vmapped batch, padded to
     ``chunk`` runs; return one record per run. An exception becomes error records, not a lost task."""
-    enable_compilation_cache()
     seeds = [seed for _, seed in runs]
     try:
         rows = monte_carlo(scenario, seeds + [seeds[0]] * (chunk - len(seeds)), chunk_size=chunk)[: len(seeds)]
@@ -419,6 +418,7 @@ def run_sweep(
     the results tables. ``on_record(done, total)`` follows progress."""
     from distributed import as_completed
 
+    cache_on_every_worker(client)
     existing = {key: r for key, r in read_records(out).items() if key in plan.runs and r["status"] != ERROR}
     missing: dict[int, list[tuple[str, int]]] = {}
     for key, (index, seed) in plan.runs.items():
@@ -462,6 +462,23 @@ def run_sweep(
         not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()),
         warnings=warning_counts([r["metrics"] or {"warnings": []} for r in final.values()]),
     )
+
+
+def cache_on_every_worker(client: Any) -> None:
+    """JAX's persistent compilation cache (:func:`ddtrack.runner.enable_compilation_cache`) on every worker of
+    ``client``'s cluster, now and as workers join or restart: set once by the driver, as a worker plugin, so that
+    a task never changes its worker's process-wide settings."""
+    from distributed import WorkerPlugin
+
+    class CompilationCache(WorkerPlugin):
+        name = "ddtrack-compilation-cache"
+
+        def setup(self, worker: Any) -> None:
+            from ddtrack.runner import enable_compilation_cache
+
+            enable_compilation_cache()
+
+    client.register_plugin(CompilationCache())
 
 
 def local_cluster(workers: int) -> Any:
