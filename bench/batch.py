@@ -30,6 +30,8 @@ def throughput(kind: str, size: int, repeats: int, series: bool = False) -> dict
     import jax
 
     import ddtrack
+
+    ddtrack.enable_float64()
     from ddtrack.runner import batch_metrics, prepare_batch, run_setup
 
     scenario = ddtrack.load_scenario(ROOT / "scenarios" / "paper_line.toml", overrides=KINDS[kind], controller=kind)

@@ -56,6 +56,7 @@ def phases(scenario: Path, out: Path) -> dict[str, float | int]:
     from ddtrack._after_import import after_import
 
     after_import("jax", cli.one_device_per_core)  # as the command: its compile-cache entries are this run's
+    after_import("jax", lambda jax: jax.config.update("jax_enable_x64", True))  # as the command: float64
     from ddtrack.scenario import load_scenario
 
     lap("import_s")

@@ -66,6 +66,8 @@ from python_loop import (
     run_backstepping,
 )
 
+ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "paper_line.toml"
 

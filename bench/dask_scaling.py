@@ -31,7 +31,8 @@ def sweep_file(folder: Path, seeds: int, chunk: int) -> Path:
 def timed_sweep(workers: int, seeds: int, chunk: int) -> float:
     from distributed import Client
 
-    from ddtrack.sweep import local_cluster, plan_sweep, read_sweep, run_sweep
+    from ddtrack.cluster import local_cluster
+    from ddtrack.sweep import plan_sweep, read_sweep, run_sweep
 
     with tempfile.TemporaryDirectory() as tmp, local_cluster(workers) as cluster, Client(cluster) as client:
         folder = Path(tmp)
@@ -45,6 +46,9 @@ def timed_sweep(workers: int, seeds: int, chunk: int) -> float:
 
 
 def main() -> None:
+    from ddtrack import enable_float64
+
+    enable_float64()  # the driver loads scenarios; the workers get it from the sweep's plugin
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--seeds", type=int, default=128)

@@ -845,7 +845,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="Seed of the mutations [0].")
     parser.add_argument("--workdir", type=Path, help="Folder for the cases' files [default: a temporary one].")
     args = parser.parse_args(argv)
-    import ddtrack  # noqa: F401  (float64)
+    import ddtrack
+
+    ddtrack.enable_float64()
 
     rng = random.Random(args.seed)
     scenarios, sweeps = scenario_bases(), sweep_bases()

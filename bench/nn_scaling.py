@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ddtrack import enable_float64
 from ddtrack.metrics import improvement
 from ddtrack.runner import batch_metrics, enable_compilation_cache, prepare_batch
 from ddtrack.scenario import load_scenario
@@ -94,6 +95,7 @@ def measure(robot: str, rate: float, seeds: list[int]) -> dict:
 
 
 def main() -> None:
+    enable_float64()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--rates", default="10,20,50,100", help="control rates [Hz], comma-separated")

@@ -25,6 +25,8 @@ import ddtrack
 from ddtrack.runner import batch_metrics, prepare_batch, run_setup
 from ddtrack.sim import rk4
 
+ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

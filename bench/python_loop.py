@@ -27,6 +27,8 @@ and recording anything but the state.
 Usage::
 
     import ddtrack
+
+    ddtrack.enable_float64()
     from python_loop import params_from_scenario, run_backstepping
     states = run_backstepping(**params_from_scenario(ddtrack.load_scenario("scenarios/paper_line.toml")))
     states[-1]   # == ddtrack.run(...).state[-1] to about 1e-12

@@ -132,6 +132,8 @@ def measure_library(
     from python_loop import params_from_nn_setup, params_from_scenario, run_backstepping, run_nn_adaptive
 
     import ddtrack
+
+    ddtrack.enable_float64()
     from ddtrack.runner import run_setup
 
     import_s = time.perf_counter() - start

@@ -22,6 +22,8 @@ from ddtrack.controllers import Cascade, ComputedTorque, VelocityCommand
 from ddtrack.geometry import posture_error
 from ddtrack.runner import run_setup
 
+ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
+
 
 @jax.tree_util.register_dataclass  # the simulator is jitted: a controller is a pytree of its parameters
 @dataclasses.dataclass(frozen=True)

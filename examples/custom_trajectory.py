@@ -20,6 +20,8 @@ import ddtrack
 from ddtrack.runner import run_setup
 from ddtrack.trajectories import ParametricCurve
 
+ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
+
 
 @jax.tree_util.register_dataclass  # a pytree, so changing a field never recompiles the simulator
 @dataclasses.dataclass(frozen=True)

@@ -18,6 +18,8 @@ import numpy as np
 import ddtrack
 from ddtrack.metrics import mean_ci
 
+ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
+
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--seeds", type=int, default=32, help="runs, seeds 0 .. N-1")
 parser.add_argument("--scenario", default=Path(__file__).resolve().parents[1] / "scenarios" / "paper_line.toml")

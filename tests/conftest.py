@@ -10,8 +10,10 @@ import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # headless, as the ddtrack command draws (set before Matplotlib loads)
 
-import ddtrack  # noqa: F401  (turns on float64 before any test builds an array)
+import ddtrack
 from ddtrack.cli import main
+
+ddtrack.enable_float64()  # as a script must, before any test builds an array
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

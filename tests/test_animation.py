@@ -176,7 +176,7 @@ def test_importing_ddtrack_leaves_matplotlib_s_backend_alone(short_run, tmp_path
 
     script = (
         "import matplotlib; matplotlib.use('svg')\n"
-        "import ddtrack.plotting, ddtrack.animation\n"
+        "import ddtrack, ddtrack.plotting, ddtrack.animation\nddtrack.enable_float64()\n"
         "from ddtrack.animation import animate, read_run\n"
         "assert matplotlib.get_backend() == 'svg', matplotlib.get_backend()\n"
         f"columns, _ = read_run({str(short_run)!r})\n"

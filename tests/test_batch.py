@@ -159,7 +159,7 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     with two devices must give the rows this one-device process gives."""
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nfrom ddtrack.runner import monte_carlo, shard_runs\n"
+        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo, shard_runs\n"
         "assert len(jax.devices()) == 2 and len(shard_runs(jax.numpy.zeros(4)).sharding.device_set) == 2\n"
         f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"

@@ -153,7 +153,7 @@ def test_the_kinematic_law_is_bit_identical_once_fma_contraction_is_off():
     if platform.machine().lower() not in ("x86_64", "amd64"):
         pytest.skip("--xla_cpu_max_isa=AVX names an x86 instruction set")
     script = (
-        "import sys, numpy as np, ddtrack\n"
+        "import sys, numpy as np, ddtrack\nddtrack.enable_float64()\n"
         "from ddtrack.runner import row, run_batch\n"
         f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r},"
         " controller='kinematic_backstepping')\n"

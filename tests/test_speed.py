@@ -44,14 +44,28 @@ def test_help_and_version_load_no_heavy_library():
 
 
 @pytest.mark.parametrize("first", ["ddtrack", "jax"])
-def test_float64_and_the_environment_still_follow_the_import(first):
-    """Whichever comes first, JAX computes in float64 and Gymnasium knows the environment."""
+def test_importing_ddtrack_leaves_jax_alone_and_registers_the_environment(first):
+    """Whichever comes first, JAX stays in float32 until the script says otherwise (a process-wide setting is the
+    caller's decision), and Gymnasium knows the environment."""
     second = "jax" if first == "ddtrack" else "ddtrack"
     out = python(
         f"import {first}, {second}, gymnasium\n"
-        "print(jax.numpy.ones(1).dtype, 'ddtrack/DiffDriveTracking-v0' in gymnasium.registry)"
+        "before = jax.numpy.ones(1).dtype\n"
+        "ddtrack.enable_float64()\n"
+        "print(before, jax.numpy.ones(1).dtype, 'ddtrack/DiffDriveTracking-v0' in gymnasium.registry)"
     )
-    assert out.split()[-2:] == ["float64", "True"]
+    assert out.split()[-3:] == ["float32", "float64", "True"]
+
+
+def test_a_script_without_float64_is_told_the_fix():
+    out = python(
+        "import ddtrack\n"
+        "try:\n"
+        "    ddtrack.load_scenario('scenarios/paper_line.toml')\n"
+        "except ddtrack.RunError as exc:\n"
+        "    print('refused:', exc)\n"
+    )
+    assert "refused: ddtrack computes in float64" in out and "ddtrack.enable_float64()" in out
 
 
 def test_names_load_on_first_use():

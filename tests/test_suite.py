@@ -28,7 +28,7 @@ CONTROLLERS = ["backstepping", "ltv_lqr", TUNED]
 def finished(tmp_path_factory):
     from distributed import Client
 
-    from ddtrack.sweep import local_cluster
+    from ddtrack.cluster import local_cluster
 
     out = tmp_path_factory.mktemp("bench")
     (out / "tuned.toml").write_text('[controller]\nkind = "backstepping"\ngains = [2.0, 80.0, 20.0]\n')  # no tuning

@@ -204,7 +204,7 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
 def test_local_cluster_listens_on_loopback_only():
     from distributed import Client
 
-    from ddtrack.sweep import local_cluster
+    from ddtrack.cluster import local_cluster
 
     with local_cluster(2) as cluster, Client(cluster) as client:
         addresses = [cluster.scheduler_address, *client.scheduler_info()["workers"]]

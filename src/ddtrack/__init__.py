@@ -3,13 +3,15 @@
 Quick start::
 
     import ddtrack
+    ddtrack.enable_float64()                  # once, first: ddtrack computes in float64
     scenario = ddtrack.load_scenario("scenarios/paper_line.toml")
     result = ddtrack.run(scenario, seed=0)
     columns = ddtrack.timeseries(result)     # NumPy columns: t, x, y, ..., e_tr, tau_r, tau_l
 
 ``import ddtrack`` is light: the names below are imported on first use (PEP 562), so the command line's
-``--help`` or a script that only loads scenarios does not pay for JAX. JAX runs in float64 and Gymnasium knows
-``ddtrack/DiffDriveTracking-v0`` as soon as either is imported, before or after ddtrack.
+``--help`` does not pay for JAX. Importing ddtrack changes no process-wide setting but one: Gymnasium knows
+``ddtrack/DiffDriveTracking-v0`` as soon as it is imported, before or after ddtrack (registering on import is
+how Gymnasium finds third-party environments). Switching JAX to float64 is your call: :func:`enable_float64`.
 """
 
 from importlib import import_module as _import_module
@@ -19,17 +21,12 @@ from typing import TYPE_CHECKING, Any
 from ._after_import import after_import as _after_import
 
 
-def _enable_float64(jax: ModuleType) -> None:
-    jax.config.update("jax_enable_x64", True)  # float64 everywhere: set before any array exists
-
-
 def _register_env(gymnasium: ModuleType) -> None:
     from .envs import register_envs  # one place registers ddtrack/DiffDriveTracking-v0
 
     register_envs()
 
 
-_after_import("jax", _enable_float64)
 _after_import("gymnasium", _register_env)
 
 if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time they load on first use
@@ -39,6 +36,7 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .metrics import improvement as improvement
     from .metrics import summarize as summarize
     from .metrics import tracking_error as tracking_error
+    from .precision import enable_float64 as enable_float64
     from .runner import monte_carlo as monte_carlo
     from .runner import prepare as prepare
     from .runner import run as run
@@ -71,6 +69,7 @@ _SOURCES = {
     "SimResult": "sim",
     "simulate": "sim",
     "timeseries": "sim",
+    "enable_float64": "precision",
 }
 
 __all__ = sorted(_SOURCES)  # noqa: PLE0605 (the lazy-import table above is the one list of public names)

@@ -7,6 +7,7 @@ import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -63,8 +64,6 @@ def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int
     """A client of the given scheduler, or of an embedded cluster on 127.0.0.1 (closed on exit)."""
     from distributed import Client
 
-    from .sweep import local_cluster
-
     cluster = None
     try:
         if scheduler is not None or scheduler_file is not None:
@@ -84,3 +83,21 @@ def dask_client(scheduler: str | None, scheduler_file: Path | None, workers: int
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def local_cluster(workers: int) -> Any:
+    """An embedded cluster that listens on loopback only, with one thread per worker process."""
+    import logging
+
+    from distributed import LocalCluster
+
+    # the scheduler serves its HTTP endpoints whatever the dashboard setting (None still takes :8787, and warns when
+    # another cluster holds it): a free port on loopback instead
+    return LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        silence_logs=logging.ERROR,
+    )

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ConfigError
+from .precision import require_float64
 
 NEAR_LIMIT = 0.9  #: a reference above this fraction of a clamp leaves the feedback no room: warned
 MAX_SAMPLES = 20_001
@@ -35,6 +36,7 @@ def _sampler() -> Callable[..., Any]:  # (trajectory, times) -> Reference; this 
 
 def sample_reference(scenario: Any) -> Any:
     """The scenario's reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
+    require_float64()  # loading samples the reference in JAX
     import jax
 
     sim = scenario.simulation

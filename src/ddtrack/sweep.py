@@ -465,38 +465,23 @@ def run_sweep(
 
 
 def cache_on_every_worker(client: Any) -> None:
-    """JAX's persistent compilation cache (:func:`ddtrack.runner.enable_compilation_cache`) on every worker of
-    ``client``'s cluster, now and as workers join or restart: set once by the driver, as a worker plugin, so that
-    a task never changes its worker's process-wide settings."""
+    """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
+    (:func:`ddtrack.runner.enable_compilation_cache`) on every worker of ``client``'s cluster, now and as workers
+    join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
+    process-wide settings."""
     from distributed import WorkerPlugin
 
     class CompilationCache(WorkerPlugin):
         name = "ddtrack-compilation-cache"
 
         def setup(self, worker: Any) -> None:
+            from ddtrack.precision import enable_float64
             from ddtrack.runner import enable_compilation_cache
 
+            enable_float64()
             enable_compilation_cache()
 
     client.register_plugin(CompilationCache())
-
-
-def local_cluster(workers: int) -> Any:
-    """An embedded cluster that listens on loopback only, with one thread per worker process."""
-    import logging
-
-    from distributed import LocalCluster
-
-    # the scheduler serves its HTTP endpoints whatever the dashboard setting (None still takes :8787, and warns when
-    # another cluster holds it): a free port on loopback instead
-    return LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-        silence_logs=logging.ERROR,
-    )
 
 
 __all__ = [

@@ -17,6 +17,7 @@ import click
 
 from .._after_import import after_import
 from ..errors import ConfigError, RunError
+from ..precision import enable_float64
 
 LISTS = ("controllers", "trajectories", "disturbances")
 
@@ -279,6 +280,7 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # commands write figures to files and never show them
+    after_import("jax", lambda jax: enable_float64())  # the commands compute in float64, once JAX is loaded
     try:
         code = cli.main(args=list(argv) if argv is not None else None, prog_name="ddtrack", standalone_mode=False)
     except click.exceptions.Exit as exc:

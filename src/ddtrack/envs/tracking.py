@@ -81,6 +81,7 @@ from ..controllers import Backstepping
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
 from ..model import DynamicPlant
+from ..precision import enable_float64
 from ..runner import prepare
 from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, kanayama_gains, load_scenario
 from ..shipped import scenario_path
@@ -204,7 +205,8 @@ def _step(
 class DiffDriveTrackingEnv(gymnasium.Env):
     """Track a scenario's reference with a differential-drive robot, one control period per step.
 
-    See the module docstring for the action modes, observation, reward and termination.
+    See the module docstring for the action modes, observation, reward and termination. Creating it switches JAX
+    to float64 for the process (:func:`ddtrack.enable_float64`), so that ``gymnasium.make`` works as it is.
 
     Parameters
     ----------
@@ -234,6 +236,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         effort_weight: float = DEFAULT_EFFORT_WEIGHT,
         render_mode: str | None = None,
     ) -> None:
+        enable_float64()  # documented above: an environment made by gymnasium.make has no other place to ask
         if action_mode not in ACTION_MODES:
             raise ConfigError(
                 "action_mode", f"unknown action mode {action_mode!r}", did_you_mean(str(action_mode), ACTION_MODES)

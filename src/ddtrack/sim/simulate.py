@@ -11,6 +11,7 @@ from jax import Array
 
 from ..geometry import posture_error
 from ..model import MeasurementNoise, Plant, WheelDisturbance
+from ..precision import require_float64
 from ..trajectories import Trajectory
 from .integrators import rk4
 from .result import SimResult
@@ -170,6 +171,7 @@ def simulate(
         the recorded series (states, references, errors, controls, logs; N rows each), the status and the
         index of the failing period (-1 when none)
     """
+    require_float64()
     x0 = jnp.asarray(x0, dtype=float)
     memory0 = controller.init(x0, trajectory(0.0), draws.controller_key)
 
