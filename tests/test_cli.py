@@ -223,6 +223,14 @@ def test_adaptive_run_writes_gains_and_identification(tmp_path, cli):
     )
     assert code == 0 and "nn_adaptive_backstepping" in stdout
     assert (out / "figures" / "gains.png").stat().st_size > 10_000  # gains that moved get their figure
+    # the gains start at the scenario's, stay inside the adaptation's bounds, and end where metrics.json says
+    spec = load_scenario(out / "scenario.toml")
+    columns = pq.read_table(out / "timeseries.parquet").to_pydict()
+    logged = np.column_stack([columns[k] for k in ("kx", "ky", "ktheta")])
+    assert np.array_equal(logged[0], spec.controller.gains)
+    assert np.all(logged >= np.asarray(spec.controller.gain_min)) and np.all(logged <= spec.controller.gain_max)
+    final = json.loads((out / "metrics.json").read_text())["final_gains"]
+    assert np.array_equal(logged[-1], final) and not np.array_equal(final, spec.controller.gains)
     found = json.loads((out / "identification.json").read_text())
     assert found["epochs"] == 5 and len(found["epoch_loss"]) == 5 and found["samples"] == 5999
     assert found["epoch_loss"][-1] < found["epoch_loss"][0]  # pre-training learns
