@@ -202,3 +202,28 @@ def test_total_adds_in_one_order_whatever_the_batch():
     for size in (2, 64):
         assert np.asarray(jax.jit(jax.vmap(total))(rows[:size]))[0].tobytes() == alone.tobytes()
     assert float(alone) == pytest.approx(math.fsum(rows[0]), rel=1e-14)
+
+
+def test_single_and_batched_runs_take_the_same_divergence_options():
+    """``simulate_batch`` and ``simulate_alone`` take ``divergence_speed`` as ``simulate`` does (they dropped it): a
+    0.3 m/s bound stops the paper's line run, which reaches 1.9 m/s, at the same period in every form."""
+    import jax.numpy as jnp
+
+    from ddtrack.runner import prepare
+    from ddtrack.sim import simulate, simulate_alone, simulate_batch, stack
+
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "paper_line.toml", overrides=["simulation.duration=2", "simulation.metric_window=[0, 2]"]
+    )
+    setup, draws = prepare(scenario, seed=0)
+    sim = scenario.simulation
+    run = (setup.plant, setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws)
+    steps = {"n_steps": sim.n_steps, "control_period": sim.control_period, "substeps": sim.substeps}
+    common = {**steps, "divergence_error": 100.0, "divergence_speed": 0.3}
+    lone = simulate(*run, **common, disturbance=setup.disturbance, noise=setup.noise)
+    alone = simulate_alone(*run, setup.disturbance, setup.noise, **common)
+    batch = simulate_batch(*stack([(*run, setup.disturbance, setup.noise)] * 2), **common)
+    indices = [int(lone.failure_index), int(alone.failure_index), *map(int, batch.failure_index)]
+    assert lone.status_name == "diverged" and len(set(indices)) == 1 and indices[0] > 0, indices
+    unbounded = simulate_alone(*run, setup.disturbance, setup.noise, **steps, divergence_error=100.0)
+    assert unbounded.status_name == "ok"  # the default bound (DIVERGENCE_SPEED, 50 m/s) lets it run

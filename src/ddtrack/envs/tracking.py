@@ -85,13 +85,12 @@ from ..precision import enable_float64
 from ..runner import prepare
 from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, kanayama_gains, load_scenario
 from ..shipped import scenario_path
-from ..sim import STATUS_NAMES, Draws, period_status, plant_period
+from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, Draws, period_status, plant_period
 
 ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
 GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
-DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] at which a run diverges (simulate's default, as in a run)
 GAINS_CONTROLLERS = (
     "backstepping",
     "nn_adaptive_backstepping",

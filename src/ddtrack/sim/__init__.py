@@ -4,9 +4,10 @@ from .batch import simulate_alone, simulate_batch, stack, vmap_runs
 from .integrators import rk4, rk4_step
 from .result import REMEDIES, STATUS_NAMES, SimResult, remedy, timeseries
 from .sensitivity import NominalPeriod
-from .simulate import Draws, period_status, plant_period, simulate
+from .simulate import DIVERGENCE_SPEED, Draws, period_status, plant_period, simulate
 
 __all__ = [
+    "DIVERGENCE_SPEED",
     "REMEDIES",
     "STATUS_NAMES",
     "Draws",

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 
 from .result import SimResult
-from .simulate import simulate
+from .simulate import DIVERGENCE_SPEED, simulate
 
 
 def stack(trees: Sequence[Any]) -> Any:
@@ -48,6 +48,7 @@ def simulate_batch(
     control_period: float,
     substeps: int,
     divergence_error: float,
+    divergence_speed: float = DIVERGENCE_SPEED,
 ) -> SimResult:
     """Run B simulations at once; every argument but the static ones has a leading batch axis B.
 
@@ -67,6 +68,7 @@ def simulate_batch(
             disturbance=disturbance,
             noise=noise,
             divergence_error=divergence_error,
+            divergence_speed=divergence_speed,
         )
 
     return vmap_runs(one)(plant, controller, trajectory, x0, draws, disturbance, noise)
@@ -86,6 +88,7 @@ def simulate_alone(
     control_period: float,
     substeps: int,
     divergence_error: float,
+    divergence_speed: float = DIVERGENCE_SPEED,
 ) -> SimResult:
     """One run (arguments without a batch axis) as row 0 of :func:`simulate_batch`, so that its bits equal its row
     in any batch; adding and removing the batch axis happen inside this one compiled program (no per-leaf dispatch).
@@ -94,6 +97,11 @@ def simulate_alone(
         lambda leaf: jnp.asarray(leaf)[None], (plant, controller, trajectory, x0, draws, disturbance, noise)
     )
     batch = simulate_batch(
-        *runs, n_steps=n_steps, control_period=control_period, substeps=substeps, divergence_error=divergence_error
+        *runs,
+        n_steps=n_steps,
+        control_period=control_period,
+        substeps=substeps,
+        divergence_error=divergence_error,
+        divergence_speed=divergence_speed,
     )
     return jax.tree_util.tree_map(lambda leaf: leaf[0], batch)

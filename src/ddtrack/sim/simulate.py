@@ -42,6 +42,9 @@ class Draws(NamedTuple):
         return Draws(jnp.zeros((n_steps, 2)), jnp.zeros((n_steps, 5)), jax.random.PRNGKey(0))
 
 
+DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] beyond which a run has diverged, unless a caller says otherwise
+
+
 def plant_period(
     plant: Plant,
     x: Array,
@@ -96,7 +99,7 @@ def period_status(
     error: Array,
     *,
     divergence_error: Array | float = 50.0,
-    divergence_speed: Array | float = 50.0,
+    divergence_speed: Array | float = DIVERGENCE_SPEED,
 ) -> Array:
     """The status of one control period (``STATUS_NAMES``): 2 (``non_finite``) when x_{k+1} or the held input
     is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds
@@ -123,7 +126,7 @@ def simulate(
     disturbance: WheelDisturbance = WheelDisturbance(),
     noise: MeasurementNoise = MeasurementNoise(),
     divergence_error: float = 50.0,
-    divergence_speed: float = 50.0,
+    divergence_speed: float = DIVERGENCE_SPEED,
 ) -> SimResult:
     """Simulate ``n_steps`` control periods of ``controller`` on ``plant`` tracking ``trajectory``.
 
