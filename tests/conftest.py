@@ -54,3 +54,26 @@ def cli(capsys):
         return code, out, err
 
     return invoke
+
+
+# The longest test files first: pytest-xdist (scripts/check, --dist loadfile) hands whole files to the workers in
+# collection order, so a long file collected last would leave the other core idle while it runs.
+LONGEST_FIRST = (
+    "test_golden.py",
+    "test_determinism.py",
+    "test_nn_adaptive.py",
+    "test_sweep.py",
+    "test_readme.py",
+    "test_nn_scaling.py",
+    "test_fuzz.py",
+    "test_baselines_adaptive_mppi.py",
+    "test_report.py",
+    "test_cli.py",
+    "test_envs.py",
+    "test_package.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep their order
