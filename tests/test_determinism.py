@@ -51,14 +51,10 @@ def metrics_of(scenario, result) -> dict:
 
 def run_metrics_of(scenario, seed: int) -> dict:
     """The metrics ``ddtrack run`` writes for one seed: statistics, grip and warnings (identification NMSE too)."""
-    from ddtrack.runner import prepare, run_metrics, run_setup, traction_columns
+    from ddtrack.runner import prepare, run_record, run_setup
 
     setup, draws = prepare(scenario, seed=seed)
-    result = run_setup(scenario, setup, draws)
-    columns = ddtrack.timeseries(result)
-    columns |= traction_columns(setup.plant_params, columns)
-    nmse = None if setup.identification is None else setup.identification.nmse
-    return run_metrics(scenario, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
+    return run_record(scenario, setup, run_setup(scenario, setup, draws))[1]
 
 
 def assert_same_bits(a: dict, b: dict) -> None:

@@ -32,7 +32,7 @@ def case_metrics(path: Path, controller: str | None) -> dict:
     """``metrics.json`` of the case, as ``ddtrack run`` writes it; ``controller`` None: the scenario's own, whole."""
     import ddtrack
     from ddtrack.errors import ConfigError
-    from ddtrack.runner import prepare, run_metrics, run_setup
+    from ddtrack.runner import prepare, run_record, run_setup
 
     overrides = []
     if controller is not None:
@@ -42,15 +42,7 @@ def case_metrics(path: Path, controller: str | None) -> dict:
     except ConfigError as refused:
         return {"refused": str(refused)}
     setup, draws = prepare(scenario, seed=0)
-    result = run_setup(scenario, setup, draws)
-    nmse = None if setup.identification is None else setup.identification.nmse
-    return run_metrics(
-        scenario,
-        ddtrack.timeseries(result),
-        status=result.status_name,
-        failure_time=result.failure_time,
-        nmse=nmse,
-    )
+    return run_record(scenario, setup, run_setup(scenario, setup, draws))[1]
 
 
 def scenario_cases(path: Path) -> dict[str, dict]:

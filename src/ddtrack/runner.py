@@ -27,7 +27,7 @@ from .identification import Identification, identify
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance, traction
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
-from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, vmap_runs
+from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .trajectories import Trajectory
 
 Batched = TypeVar("Batched")
@@ -378,6 +378,16 @@ def run_metrics(
     )
     metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse) if status == "ok" else []
     return metrics
+
+
+def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dict, dict]:
+    """(columns, metrics) of a finished single run as ``ddtrack run`` writes them: the time series with the grip it
+    needed (:func:`traction_columns`), and ``metrics.json`` (:func:`run_metrics`, the identification NMSE included)."""
+    columns = timeseries(result)
+    columns |= traction_columns(setup.plant_params, columns)
+    nmse = None if setup.identification is None else setup.identification.nmse
+    metrics = run_metrics(scenario, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
+    return columns, metrics
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))

@@ -65,8 +65,8 @@ def run(
 
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     from ..rundir import write_run
-    from ..runner import needs_identification, prepare, run_metrics, run_setup, traction_columns
-    from ..sim import remedy, timeseries
+    from ..runner import needs_identification, prepare, run_record, run_setup
+    from ..sim import remedy
 
     show = terminal_status()
     show("identifying the robot: the NN emulator's pre-training run" if needs_identification(spec) else "preparing")
@@ -74,11 +74,8 @@ def run(
     show(f"simulating {spec.simulation.duration:g} s")
     result = run_setup(spec, setup, draws)
     show("writing the run folder and its figures")
-    columns = timeseries(result)
-    columns |= traction_columns(setup.plant_params, columns)  # the grip the run needed, and its wheel speeds
+    columns, metrics = run_record(spec, setup, result)  # with the grip the run needed, and its wheel speeds
     sim = spec.simulation
-    nmse = None if setup.identification is None else setup.identification.nmse
-    metrics = run_metrics(spec, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
     identification = None
     if setup.identification is not None:
         found = setup.identification
