@@ -83,7 +83,15 @@ from ..geometry import posture_error
 from ..model import DynamicPlant
 from ..precision import enable_float64
 from ..runner import prepare
-from ..scenario import BacksteppingConfig, NNAdaptiveConfig, Scenario, Setup, kanayama_gains, load_scenario
+from ..scenario import (
+    KANAYAMA_KINDS,
+    BacksteppingConfig,
+    NNAdaptiveConfig,
+    Scenario,
+    Setup,
+    kanayama_gains,
+    load_scenario,
+)
 from ..shipped import scenario_path
 from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, Draws, period_status, plant_period
 
@@ -91,13 +99,7 @@ ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
 GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
-GAINS_CONTROLLERS = (
-    "backstepping",
-    "nn_adaptive_backstepping",
-    "sliding_mode_backstepping",
-    "adaptive_backstepping",
-    "kinematic_backstepping",
-)  #: kinds whose outer law is Kanayama's
+GAINS_CONTROLLERS = tuple(KANAYAMA_KINDS)  #: kinds whose outer law is Kanayama's
 RESET_OPTIONS = ("initial_pose",)
 
 

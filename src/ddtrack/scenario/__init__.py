@@ -20,6 +20,7 @@ from ._base import Position as Position
 from ._base import Positive as Positive
 from ._base import _Section as _Section
 from ._base import read_input as read_input
+from .baseline_configs import KANAYAMA_KINDS as KANAYAMA_KINDS
 from .baseline_configs import AdaptiveBacksteppingConfig as AdaptiveBacksteppingConfig
 from .baseline_configs import ControllerConfig as ControllerConfig
 from .baseline_configs import KanayamaControllerConfig as KanayamaControllerConfig

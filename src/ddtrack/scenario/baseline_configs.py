@@ -5,6 +5,7 @@ those whose outer law is Kanayama's.
 from __future__ import annotations
 
 import math
+import typing
 from typing import Annotated, Literal
 
 import jax
@@ -349,6 +350,12 @@ ControllerConfig = Annotated[
 KanayamaControllerConfig = (
     BacksteppingConfig | NNAdaptiveConfig | SlidingModeConfig | KinematicBacksteppingConfig | AdaptiveBacksteppingConfig
 )
+
+
+#: the ``kind`` of each of them, in the union's order
+KANAYAMA_KINDS = [
+    typing.get_args(m.model_fields["kind"].annotation)[0] for m in typing.get_args(KanayamaControllerConfig)
+]
 
 
 def kanayama_gains(config: ControllerConfig) -> tuple[float, float, float]:
