@@ -291,3 +291,15 @@ def test_on_a_paper_scenario_the_seed_changes_nothing():
         env.reset(seed=seed)
         rollouts.append([env.step(np.zeros(2))[1] for _ in range(20)])
     assert rollouts[0] == rollouts[1]
+
+
+def test_importing_ddtrack_envs_after_ddtrack_registers_the_environment():
+    """``import ddtrack`` then ``import ddtrack.envs``: Gymnasium loads inside ddtrack.envs' own import, which
+    registers the environment at its end (the import hook once tried to register from the half-loaded module)."""
+    code = (
+        "import ddtrack\nimport ddtrack.envs\nimport gymnasium\n"
+        "print('ddtrack/DiffDriveTracking-v0' in gymnasium.registry)\n"
+    )
+    done = subprocess.run([sys.executable, "-W", "error", "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"

@@ -14,6 +14,7 @@ Quick start::
 how Gymnasium finds third-party environments). Switching JAX to float64 is your call: :func:`enable_float64`.
 """
 
+import sys as _sys
 from importlib import import_module as _import_module
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -22,6 +23,8 @@ from ._after_import import after_import as _after_import
 
 
 def _register_env(gymnasium: ModuleType) -> None:
+    if f"{__name__}.envs" in _sys.modules:  # Gymnasium loads inside ddtrack.envs' import, which registers at its end
+        return
     from .envs import register_envs  # one place registers ddtrack/DiffDriveTracking-v0
 
     register_envs()
