@@ -264,6 +264,7 @@ class _Robot:
 @dataclass
 class _Scene:
     fig: Figure
+    canvas: FigureCanvasAgg  #: the figure's own Agg canvas, which blitting needs
     draw: Callable[[int], None]  #: updates every moving artist to a row of the time series
     moving: list  #: the artists draw() changes, in drawing order
 
@@ -278,7 +279,7 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
     x_lim, y_lim = _limits(c, margin=2.5 * half_axle)
     # a figure of its own on an Agg canvas, outside pyplot: blitting needs Agg, whatever the user's backend
     fig = Figure(figsize=_figure_size(np.ptp(y_lim) / np.ptp(x_lim), with_gains, dpi), dpi=dpi, layout="constrained")
-    FigureCanvasAgg(fig)
+    canvas = FigureCanvasAgg(fig)
     if with_gains:
         grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1.0))
         ax = fig.add_subplot(grid[:, 0])
@@ -367,7 +368,7 @@ def _scene(columns: Columns, *, half_axle: float, wheel_radius: float, title: st
         clock,
         *(artist for cursor, done, _ in cursors for artist in (done, cursor)),
     ]
-    return _Scene(fig, draw, moving)
+    return _Scene(fig, canvas, draw, moving)
 
 
 def animation_figure(

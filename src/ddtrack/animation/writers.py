@@ -11,8 +11,6 @@ from typing import Any
 
 import numpy as np
 from matplotlib.animation import FFMpegWriter, PillowWriter
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from PIL import Image
 
 from ..errors import ConfigError, RunError
@@ -37,7 +35,7 @@ class _Blitter:
 
     def __init__(self, scene: _Scene) -> None:
         self.scene = scene
-        canvas = _agg_canvas(scene.fig)
+        canvas = scene.canvas
         canvas.draw()  # constrained layout, once
         scene.fig.set_layout_engine("none")  # frozen, so the background stays valid
         for artist in scene.moving:
@@ -47,20 +45,12 @@ class _Blitter:
 
     def frame(self, row: int) -> Image.Image:
         self.scene.draw(row)
-        canvas = _agg_canvas(self.scene.fig)
+        canvas = self.scene.canvas
         canvas.restore_region(self.background)
         for artist in self.scene.moving:
             self.scene.fig.draw_artist(artist)
         width, height = canvas.get_width_height(physical=True)
         return Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
-
-
-def _agg_canvas(fig: Figure) -> FigureCanvasAgg:
-    """The figure's canvas, which blitting needs to be Agg's (or one built on it, as every raster backend is)."""
-    canvas = fig.canvas
-    if not isinstance(canvas, FigureCanvasAgg):
-        raise RuntimeError(f"animations need an Agg-based Matplotlib canvas, not {type(canvas).__name__}")
-    return canvas
 
 
 class _BlitPillowWriter(PillowWriter):
