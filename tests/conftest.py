@@ -44,6 +44,15 @@ def no_persistent_cache_in_this_process():
         yield
 
 
+@pytest.fixture(autouse=True)
+def persistent_cache_stays_off():
+    """Names the test that turned the persistent cache on in this process (see above) instead of a crash later."""
+    import jax
+
+    yield
+    assert jax.config.jax_compilation_cache_dir is None, "this test turned on JAX's persistent cache in-process"
+
+
 @pytest.fixture
 def cli(capsys):
     """Run ``ddtrack ARGS`` in-process; return (exit code, stdout, stderr)."""

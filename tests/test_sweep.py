@@ -168,6 +168,7 @@ def test_bad_sweep_files_exit_2_naming_the_field(tmp_path, cli, text, field):
 
 
 def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch):
+    import jax
     from distributed import Client, LocalCluster
 
     import ddtrack.sweep as sweep
@@ -185,7 +186,10 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
         Client(cluster) as client,
     ):
         monkeypatch.setattr(sweep, "monte_carlo", broken)
+        cache_before = jax.config.jax_compilation_cache_dir
         failed = sweep.run_sweep(plan, out, client)
+        # a worker in this very process keeps its caller's settings: the driver turns no process-wide switch
+        assert cache_before is None and jax.config.jax_compilation_cache_dir is None
         records = read_records(out)
         assert failed.errors == 2 and len(records) == 2
         assert all(

@@ -19,6 +19,7 @@ import io
 import itertools
 import json
 import math
+import os
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -468,20 +469,28 @@ def cache_on_every_worker(client: Any) -> None:
     """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
     (:func:`ddtrack.runner.enable_compilation_cache`) on every worker of ``client``'s cluster, now and as workers
     join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
-    process-wide settings."""
+    process-wide settings. A threaded worker in the driver's own process is left alone: that process's settings are
+    its caller's to choose."""
     from distributed import WorkerPlugin
 
     class CompilationCache(WorkerPlugin):
         name = "ddtrack-compilation-cache"
 
+        def __init__(self, driver_pid: int) -> None:
+            self.driver_pid = driver_pid
+
         def setup(self, worker: Any) -> None:
+            import os
+
+            if os.getpid() == self.driver_pid:
+                return
             from ddtrack.precision import enable_float64
             from ddtrack.runner import enable_compilation_cache
 
             enable_float64()
             enable_compilation_cache()
 
-    client.register_plugin(CompilationCache())
+    client.register_plugin(CompilationCache(os.getpid()))
 
 
 __all__ = [
