@@ -467,10 +467,9 @@ def run_sweep(
 
 def cache_on_every_worker(client: Any) -> None:
     """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
-    (:func:`ddtrack.runner.enable_compilation_cache`) on every worker of ``client``'s cluster, now and as workers
-    join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
-    process-wide settings. A threaded worker in the driver's own process is left alone: that process's settings are
-    its caller's to choose."""
+    (:func:`ddtrack.runner.enable_compilation_cache`) on every worker process of ``client``'s cluster, now and as
+    workers join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
+    settings. A threaded worker in the driver's own process is left alone: that process is its caller's."""
     from distributed import WorkerPlugin
 
     class CompilationCache(WorkerPlugin):
@@ -480,30 +479,15 @@ def cache_on_every_worker(client: Any) -> None:
             self.driver_pid = driver_pid
 
         def setup(self, worker: Any) -> None:
-            import os
+            if os.getpid() != self.driver_pid:
+                from ddtrack.precision import enable_float64
+                from ddtrack.runner import enable_compilation_cache
 
-            if os.getpid() == self.driver_pid:
-                return
-            from ddtrack.precision import enable_float64
-            from ddtrack.runner import enable_compilation_cache
-
-            enable_float64()
-            enable_compilation_cache()
+                enable_float64()
+                enable_compilation_cache()
 
     client.register_plugin(CompilationCache(os.getpid()))
 
 
-__all__ = [
-    "Configuration",
-    "Outcome",
-    "Plan",
-    "SweepFile",
-    "plan_sweep",
-    "read_records",
-    "read_sweep",
-    "run_chunk",
-    "run_key",
-    "run_sweep",
-    "table",
-    "write_results",
-]
+__all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep", "run_chunk"]
+__all__ += ["run_key", "run_sweep", "table", "write_results"]
