@@ -31,7 +31,6 @@ import tomli_w
 
 from .errors import ConfigError
 from .metrics import window_mask
-from .model import DynamicPlant
 from .outdir import atomic_write
 from .runner import prepare_batch
 from .scenario import Scenario, Setup
@@ -93,7 +92,7 @@ def rollout_loss(
         controller.outer, **{f: jnp.broadcast_to(gains[i], (runs,)) for i, f in enumerate(fields)}
     )
     result = simulate_batch(
-        DynamicPlant(problem.setup.plant_params),
+        problem.setup.plant,
         dataclasses.replace(controller, outer=outer),
         problem.setup.trajectory,
         problem.setup.x0,

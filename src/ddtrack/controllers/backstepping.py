@@ -3,11 +3,14 @@ the Lyapunov function (eq. 13)."""
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
 from ..geometry import error_rates, posture_error
+from ..layout import pose, velocity
 from ..trajectories import Reference
 from .base import Logs, VelocityCommand
 
@@ -77,6 +80,7 @@ class Backstepping:
     max_velocity: Array | float = 2.0
     max_yaw_rate: Array | float = 4.0
     strict: bool = static_field(default=False)
+    output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
     @property
     def gains(self) -> Array:
@@ -87,9 +91,9 @@ class Backstepping:
 
     def command(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[VelocityCommand, tuple[()], Logs]:
         gains = self.gains
-        error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+        error = posture_error(*pose(y), ref.x, ref.y, ref.theta)
         limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
-        command = velocity_command(error, y[3:5], ref, gains, limits, self.strict)
+        command = velocity_command(error, velocity(y), ref, gains, limits, self.strict)
         return command, memory, {"kx": gains[0], "ky": gains[1], "ktheta": gains[2]}
 
     def observe(self, memory: tuple[()], saturated: Array) -> tuple[()]:

@@ -12,7 +12,7 @@ recorded and never fed back. Everything that evolves lives in ``memory``.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import jax.numpy as jnp
 from jax import Array
@@ -24,7 +24,9 @@ Logs = dict[str, Array]
 
 
 class Controller(Protocol):
-    """What the simulator needs of a controller: ``init`` once, then ``step`` every control period."""
+    """What the simulator needs of a controller: ``init`` once, then ``step`` every control period. A controller
+    may declare ``output_kind`` (``"torque"`` or ``"velocity"``), which the simulator checks against the plant's
+    ``input_kind``."""
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
         """The initial memory, from the initial state ``x0`` (5,), the reference at t = 0 and a PRNG ``key``
@@ -86,6 +88,7 @@ class Cascade:
 
     outer: Any
     inner: Any
+    output_kind: ClassVar[str] = "torque"  #: what the inner loop hands the plant
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[Any, Any]:
         return self.outer.init(x0, ref0, key), self.inner.init(x0, ref0, key)

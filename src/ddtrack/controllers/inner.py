@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import FloatVector, pytree_dataclass
+from ..layout import velocity
 from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
 from ..trajectories import Reference
 from .base import VelocityCommand
@@ -35,7 +36,7 @@ class ComputedTorque:
         return ()
 
     def torque(self, y: Array, command: VelocityCommand, memory: tuple[()]) -> tuple[Array, Array, tuple[()]]:
-        nu = y[3:5]
+        nu = velocity(y)
         u = command.nu_c_dot + jnp.asarray(self.kc) * (command.nu_c - nu) + command.feedback
         generalised = reduced_mass(self.nominal) @ u + reduced_coriolis(self.nominal, nu)
         tau = reduced_input_inverse(self.nominal) @ generalised + wheel_friction(
@@ -61,10 +62,10 @@ class WheelPD:
     control_period: float = 0.01
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Array:
-        return wheel_speeds(self.nominal, jnp.asarray(x0)[3:5])
+        return wheel_speeds(self.nominal, velocity(jnp.asarray(x0)))
 
     def torque(self, y: Array, command: VelocityCommand, memory: Array) -> tuple[Array, Array, Array]:
-        phi_dot = wheel_speeds(self.nominal, y[3:5])
+        phi_dot = wheel_speeds(self.nominal, velocity(y))
         error = wheel_speeds(self.nominal, command.nu_c) - phi_dot
         error_rate = wheel_speeds(self.nominal, command.nu_c_dot) - (phi_dot - memory) / self.control_period
         tau, saturated = _saturate(self.kp * error + self.kd * error_rate, self.nominal.max_torque)

@@ -23,6 +23,7 @@ from jax import Array
 
 from .._pytree import FloatVector, pytree_dataclass, static_field
 from ..geometry import body_increment, posture_error, rotation
+from ..layout import pose, pose_vector, velocity
 from ..trajectories import Reference
 from .backstepping import kanayama_command, velocity_command
 from .base import Logs, VelocityCommand
@@ -93,20 +94,22 @@ def sensitivity_step(
     """Sigma(k+1) = [I + T_c d(S nu)/dq + J d nu_c/dq] Sigma(k) + J^n Phi(k), with J = R_3(theta) J_b^n c_bar
     (model.md §3.6 Mode B): the transition takes the real J, the input the normalised J^n = J / c_bar (``scale``), so
     Sigma = (d q / d alpha) / c_bar, in the units of Mode A's J^n Phi. The clamps are ignored, as in Phi."""
-    theta, v = y[2], y[3]
+    theta, v = pose(y)[2], velocity(y)[0]
     world_jacobian = rotation(theta) @ plant_jacobian_body
     command_of_pose = lambda q: kanayama_command(posture_error(q[0], q[1], q[2], ref.x, ref.y, ref.theta), ref, gains)  # noqa: E731
     pose_rate_jacobian = jnp.array([[0.0, 0.0, -v * jnp.sin(theta)], [0.0, 0.0, v * jnp.cos(theta)], [0.0, 0.0, 0.0]])
     transition = (
-        jnp.eye(3) + control_period * pose_rate_jacobian + scale * world_jacobian @ jax.jacfwd(command_of_pose)(y[:3])
+        jnp.eye(3)
+        + control_period * pose_rate_jacobian
+        + scale * world_jacobian @ jax.jacfwd(command_of_pose)(pose_vector(y))
     )
-    error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+    error = posture_error(*pose(y), ref.x, ref.y, ref.theta)
     return transition @ sensitivity + world_jacobian @ gain_sensitivity(error, ref)
 
 
 def sensitivity_gradient(error: Array, y: Array, gamma: Array, sensitivity: Array, exact: bool) -> Array:
     """dJ/dalpha = e^T Gamma D Sigma, with D = D_b R_3(theta)^T the world-frame d e_p / d q (model.md §3.3)."""
-    return (gamma * error) @ error_jacobian_body(error, exact) @ rotation(y[2]).T @ sensitivity
+    return (gamma * error) @ error_jacobian_body(error, exact) @ rotation(pose(y)[2]).T @ sensitivity
 
 
 class AdaptiveMemory(NamedTuple):
@@ -178,7 +181,7 @@ class NNAdaptiveBackstepping:
             jnp.zeros(3),
             self.emulator.mlp,
             zeros_like(self.emulator.mlp),
-            x0[:3],
+            pose_vector(x0),
             jnp.zeros(n_in),
             jnp.asarray(0.0),
             jnp.asarray(0.0),
@@ -204,19 +207,19 @@ class NNAdaptiveBackstepping:
     def command(
         self, t: Array, y: Array, ref: Reference, memory: AdaptiveMemory
     ) -> tuple[VelocityCommand, AdaptiveMemory, Logs]:
-        error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
-        nu = y[3:5]
+        error = posture_error(*pose(y), ref.x, ref.y, ref.theta)
+        nu = velocity(y)
         scales, started = self.emulator.scales, memory.started > 0.5
         # a saturated transition says nothing about the command's effect (the actuators ignored it)
         learn = started if self.learn_saturated else started & (memory.previous_saturated < 0.5)
 
         # learn the last transition
         z_prev = memory.previous_input / scales.inputs
-        target = body_increment(memory.previous_pose, y[:3]) / scales.outputs
+        target = body_increment(memory.previous_pose, pose_vector(y)) / scales.outputs
         loss = jnp.where(started, sample_loss(memory.mlp, z_prev, target), 0.0)
         mlp, mlp_velocity = memory.mlp, memory.mlp_velocity
         if self.online_learning:
-            trained, velocity = momentum_step(
+            trained, momentum = momentum_step(
                 mlp,
                 mlp_velocity,
                 backprop(mlp, z_prev, target),
@@ -227,7 +230,7 @@ class NNAdaptiveBackstepping:
             keep = lambda new, old: jnp.where(learn, new, old)  # noqa: E731
             mlp, mlp_velocity = (
                 jax.tree_util.tree_map(keep, trained, mlp),
-                jax.tree_util.tree_map(keep, velocity, mlp_velocity),
+                jax.tree_util.tree_map(keep, momentum, mlp_velocity),
             )
 
         # adapt the gains (eqs. 22-26)
@@ -267,7 +270,7 @@ class NNAdaptiveBackstepping:
             step,
             mlp,
             mlp_velocity,
-            y[:3],
+            pose_vector(y),
             self.emulator.inputs(command.nu_c, nu),
             command.saturated,
             jnp.asarray(1.0),

@@ -68,7 +68,7 @@ import dataclasses
 import math
 from functools import partial
 from os import PathLike
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium
 import jax
@@ -77,10 +77,11 @@ import numpy as np
 from gymnasium import spaces
 from jax import Array
 
+from .._pytree import pytree_dataclass
 from ..controllers import Backstepping
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
-from ..model import DynamicPlant
+from ..layout import pose, velocity
 from ..precision import enable_float64
 from ..runner import prepare
 from ..scenario import (
@@ -93,7 +94,7 @@ from ..scenario import (
     load_scenario,
 )
 from ..shipped import scenario_path
-from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, Draws, period_status, plant_period
+from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws
 
 ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
@@ -126,6 +127,20 @@ class _Episode(NamedTuple):
     obs_high: Array
 
 
+@pytree_dataclass
+class HeldTorques:
+    """Torque mode's controller: the action, scaled, as the wheel torques of the period."""
+
+    torques: Array  #: (2,) [N m]
+    output_kind: ClassVar[str] = "torque"
+
+    def init(self, x0: Array, ref0: Any, key: Array) -> tuple[()]:
+        return ()
+
+    def step(self, t: Array, y: Array, ref: Any, memory: tuple[()]) -> tuple[Array, tuple[()], dict]:
+        return self.torques, memory, {}
+
+
 def _gains(episode: _Episode, action: Array) -> Array:
     """Gains (Kx, Ky, Ktheta) of an action in [-1, 1]^3: K0 exactly at 0, log-linear to the bounds at +-1."""
     return episode.gain_anchor * jnp.exp(action * jnp.where(action >= 0, episode.gain_log_up, episode.gain_log_down))
@@ -134,23 +149,25 @@ def _gains(episode: _Episode, action: Array) -> Array:
 def _observe(episode: _Episode, x: Array, k: Array, gains: Array | None) -> tuple[Array, Array, Array]:
     """Observation at period k of state x (measured with draw k), and the true error's cost J and e_tr."""
     ref = episode.trajectory(k * episode.control_period)
-    y = episode.noise.measure(x, episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
-    e = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
-    parts = [e[0], e[1], jnp.sin(e[2]), jnp.cos(e[2]), y[3], y[4], ref.v, ref.omega]
+    body = episode.plant.observe(x)
+    y = episode.noise.measure(body, episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
+    e = posture_error(*pose(y), ref.x, ref.y, ref.theta)
+    parts = [e[0], e[1], jnp.sin(e[2]), jnp.cos(e[2]), *velocity(y), ref.v, ref.omega]
     observation = jnp.stack(parts if gains is None else [*parts, *gains])
     observation = jnp.clip(observation, episode.obs_low, episode.obs_high)
-    true = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
+    true = posture_error(*pose(body), ref.x, ref.y, ref.theta)
     cost = 0.5 * (GAMMA[0] * true[0] ** 2 + GAMMA[1] * true[1] ** 2 + GAMMA[2] * true[2] ** 2)
     return observation, cost, jnp.hypot(true[0], true[1])
 
 
 @partial(jax.jit, static_argnames=("gains_mode",))
-def _start(episode: _Episode, x0: Array, key: Array, *, gains_mode: bool) -> tuple[Any, Array]:
-    """The controller's memory (as ``simulate`` initialises it) and the packed first observation."""
-    x0 = jnp.asarray(x0, dtype=float)
-    memory = episode.controller.init(x0, episode.trajectory(0.0), key) if gains_mode else ()
+def _start(episode: _Episode, body0: Array, key: Array, *, gains_mode: bool) -> tuple[Array, Any, Array]:
+    """The plant's initial state and the controller's memory (as ``simulate`` initialises them) from the BODY state
+    ``body0``, and the packed first observation."""
+    x0 = episode.plant.init(jnp.asarray(body0, dtype=float))
+    memory = episode.controller.init(episode.plant.observe(x0), episode.trajectory(0.0), key) if gains_mode else ()
     observation, _, e_tr = _observe(episode, x0, jnp.asarray(0), episode.gain_anchor if gains_mode else None)
-    return memory, jnp.concatenate([observation, jnp.stack([e_tr])])
+    return x0, memory, jnp.concatenate([observation, jnp.stack([e_tr])])
 
 
 @partial(jax.jit, static_argnames=("gains_mode", "substeps"))
@@ -160,10 +177,9 @@ def _step(
     """Period k of :func:`ddtrack.sim.simulate`'s loop with the action in place of (or inside) the controller.
 
     Returns x_{k+1}, the controller's memory and the packed host data [observation, reward, status, e_tr,
-    u_k (2,), x_{k+1} (5,), gains (3,; gains mode)]. A failed period freezes state and memory, as in ``simulate``.
+    u_k (2,), BODY of x_{k+1} (5,), gains (3,; gains mode)]. The period is :class:`~ddtrack.sim.ClosedLoop`'s, which
+    ``simulate`` steps too: a failed period freezes state and memory.
     """
-    t = k * episode.control_period
-    ref = episode.trajectory(t)
     if gains_mode:
         gains = _gains(episode, action)
         controller = episode.controller
@@ -172,34 +188,30 @@ def _step(
         else:
             outer = dataclasses.replace(controller.outer, kx=gains[0], ky=gains[1], ktheta=gains[2])
             controller = dataclasses.replace(controller, outer=outer)
-        y = episode.noise.measure(x, episode.xi_noise[k])
-        u, next_memory, _ = controller.step(t, y, ref, memory)
     else:
         gains = None
-        u, next_memory = action * episode.torque_scale, memory
-    u, x_next = plant_period(
+        controller = HeldTorques(action * episode.torque_scale)
+    loop = ClosedLoop(
         episode.plant,
-        x,
-        u,
-        t,
-        episode.xi_disturbance[k],
-        disturbance=episode.disturbance,
-        control_period=episode.control_period,
-        substeps=substeps,
+        controller,
+        episode.trajectory,
+        episode.disturbance,
+        episode.noise,
+        episode.control_period,
+        episode.divergence_error,
+        DIVERGENCE_SPEED,
+        substeps,
     )
-    error = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
-    status = period_status(
-        x, x_next, u, error, divergence_error=episode.divergence_error, divergence_speed=DIVERGENCE_SPEED
+    x_next, next_memory, status, (_, _, _, u, _) = loop.period(
+        x, memory, jnp.asarray(0), k, episode.xi_disturbance[k], episode.xi_noise[k]
     )
     keep = status == 0
-    x_next = jnp.where(keep, x_next, x)
-    next_memory = jax.tree_util.tree_map(lambda new, old: jnp.where(keep, new, old), next_memory, memory)
     observation, cost, e_tr = _observe(episode, x_next, k + 1, gains)
     effort = jnp.sum(u**2) if episode.plant.input_kind == "torque" else jnp.asarray(0.0)
     remaining = episode.n_steps - k  # this period and the ones after it
     cost = jnp.where(keep, cost + episode.effort_weight * effort, remaining * episode.cost_bound)
     reward = -episode.control_period * cost
-    parts = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, x_next]
+    parts = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, episode.plant.observe(x_next)]
     return x_next, next_memory, jnp.concatenate(parts if gains is None else [*parts, gains])
 
 
@@ -219,6 +231,9 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         w of the reward's effort term [1/(N m)^2], default :data:`DEFAULT_EFFORT_WEIGHT`
     render_mode
         only ``None`` (no rendering)
+    plant_model
+        builds the true robot's plant from its drawn parameters (``Setup.plant_model``, e.g. a plant with more states
+        than BODY); None: the scenario's
 
     Raises
     ------
@@ -236,6 +251,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         action_mode: str = "torque",
         effort_weight: float = DEFAULT_EFFORT_WEIGHT,
         render_mode: str | None = None,
+        plant_model: Any = None,
     ) -> None:
         enable_float64()  # documented above: an environment made by gymnasium.make has no other place to ask
         if action_mode not in ACTION_MODES:
@@ -260,6 +276,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         self.action_mode = action_mode
         self.effort_weight = float(effort_weight)
         self.render_mode = None
+        self.plant_model = plant_model  # None: the scenario's
         sim, config = self.scenario.simulation, self.scenario.controller
         self._gains_mode = action_mode == "gains"
         if self._gains_mode:
@@ -291,7 +308,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             "obs_high": high32.astype(float),
         }
         # the current episode's run objects (``ddtrack.runner.prepare``; x0 with the reset's options); torque mode
-        # simulates DynamicPlant(setup.plant_params) whatever the scenario's controller
+        # simulates the true robot (setup.plant_model) whatever the scenario's controller
         self.setup: Setup | None = None
         self.draws: Draws | None = None  #: and its random draws
         self._episode: _Episode | None = None
@@ -316,7 +333,9 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             seed = int(self.np_random.integers(0, 2**31 - 1))
         pose = _initial_pose(options)
         setup, draws = prepare(self.scenario, seed=seed, identify=False)  # no gain law here needs an emulator
-        plant = DynamicPlant(setup.plant_params) if not self._gains_mode else setup.plant
+        if self.plant_model is not None:
+            setup = dataclasses.replace(setup, plant_model=self.plant_model)
+        plant = setup.plant if self._gains_mode else setup.plant_model(setup.plant_params)
         x0 = jnp.asarray(setup.x0, dtype=float)
         if pose is not None:
             x0 = x0.at[:3].set(jnp.asarray(pose, dtype=float))
@@ -351,8 +370,8 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             obs_low=jnp.asarray(c["obs_low"]),
             obs_high=jnp.asarray(c["obs_high"]),
         )
-        self._memory, packed = _start(self._episode, x0, draws.controller_key, gains_mode=self._gains_mode)
-        self._x, self._k, self._done, self._seed = x0, 0, False, seed
+        self._x, self._memory, packed = _start(self._episode, x0, draws.controller_key, gains_mode=self._gains_mode)
+        self._k, self._done, self._seed = 0, False, seed
         self.setup, self.draws = dataclasses.replace(setup, x0=x0), draws
         host = np.asarray(packed)
         observation = host[: self._n_obs].astype(np.float32)

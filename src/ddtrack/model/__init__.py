@@ -19,12 +19,13 @@ from .dynamics import (
     wheel_speeds,
 )
 from .params import RobotParams
-from .plants import DynamicPlant, KinematicPlant, Plant
+from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
 
 __all__ = [
     "DynamicPlant",
     "KinematicPlant",
     "MeasurementNoise",
+    "ODEPlant",
     "Plant",
     "RobotParams",
     "WheelDisturbance",

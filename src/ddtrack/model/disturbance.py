@@ -45,12 +45,13 @@ class WheelDisturbance:
 
 @pytree_dataclass
 class MeasurementNoise:
-    """Additive Gaussian noise on what the controller sees, y = X + std * xi.
+    """Additive Gaussian noise on what the controller sees, y = X + std * xi, X the plant's observed
+    :data:`~ddtrack.layout.BODY` vector.
 
     Attributes
     ----------
     std
-        (5,) standard deviations of [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
+        (5,) standard deviations of BODY's [x, y, theta, v, omega] [m, m, rad, m/s, rad/s]
     """
 
     std: FloatVector = (0.0, 0.0, 0.0, 0.0, 0.0)

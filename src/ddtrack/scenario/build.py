@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,7 +12,8 @@ import jax.numpy as jnp
 from ..controllers import (
     Controller,
 )
-from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, RobotParams, WheelDisturbance
+from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
+from ..sim import require_matching_input
 from ..trajectories import Trajectory
 from .baseline_configs import (
     KinematicBacksteppingConfig,
@@ -36,12 +38,17 @@ class Setup:
     noise: MeasurementNoise
     identification: Any = None  #: the emulator's identification, for controllers that have one
     kinematic: bool = False  #: the controller drives the unicycle with ideal velocity tracking
+    plant_model: Callable[[RobotParams], Plant] = DynamicPlant  #: the true robot's plant from its parameters
+
+    def __post_init__(self) -> None:
+        if not self.kinematic:  # a wrong pairing is named here, before anything is simulated
+            require_matching_input(self.plant, self.controller)
 
     @property
-    def plant(self) -> DynamicPlant | KinematicPlant:
-        """What the run simulates: the true robot (``plant_params``), or for a kinematic controller the
-        unicycle that applies (v, omega) at once (its [plant], [randomize] and [disturbance] have no effect)."""
-        return KinematicPlant() if self.kinematic else DynamicPlant(self.plant_params)
+    def plant(self) -> Plant:
+        """What the run simulates: the true robot (``plant_model(plant_params)``), or for a kinematic controller
+        the unicycle that applies (v, omega) at once (its [plant], [randomize] and [disturbance] have no effect)."""
+        return KinematicPlant() if self.kinematic else self.plant_model(self.plant_params)
 
 
 def build(

@@ -45,7 +45,7 @@ class SimResult(NamedTuple):
     t : Array, shape (N,)
         Sample times t_k [s].
     state : Array, shape (N, 5)
-        The true state [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s].
+        The true BODY state [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s], as the plant observes it.
     reference : Reference
         The reference at t_k, each field of shape (N,).
     error : Array, shape (N, 3)
@@ -58,6 +58,8 @@ class SimResult(NamedTuple):
         0 ok, 1 diverged, 2 non_finite (:attr:`status_name`).
     failure_index : Array
         First failing row k, or -1.
+    plant_state : dict of str to Array
+        The plant's other states (its ``state_layout`` less BODY's), by name, each (N,); empty for BODY plants.
     """
 
     t: Array  #: (N,) sample times [s]
@@ -68,6 +70,7 @@ class SimResult(NamedTuple):
     logs: dict  #: name -> (N,) logged scalars
     status: Array  #: 0 ok, 1 diverged, 2 non_finite
     failure_index: Array  #: first failing row k, or -1
+    plant_state: dict  #: name -> (N,) the plant's states beyond BODY (e.g. wheel angles)
 
     @property
     def status_name(self) -> str:
@@ -91,7 +94,8 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     """The documented time-series columns (docs/guide.md) of the valid rows, as float64 NumPy arrays.
 
     ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
-    v_cmd, omega_cmd, tau_r, tau_l`` and every logged scalar (``kx, ky, ktheta``, ``saturated``, ...).
+    v_cmd, omega_cmd, tau_r, tau_l``, every logged scalar (``kx, ky, ktheta``, ``saturated``, ...) and the plant's
+    states beyond BODY, by their names.
     Torques are NaN for a velocity-input plant. ``theta`` and ``theta_ref`` are both continuous
     (unwrapped, so plots show no 2 pi jumps): ``theta_ref = theta + e_theta``, where ``e_theta`` is the
     posture error wrapped to (-pi, pi], so ``theta_ref - theta`` is the true heading error.
@@ -136,4 +140,5 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
         "tau_r": logs.pop("tau_r", nan),
         "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
     }
-    return columns | logs
+    extra = {name: np.asarray(value, dtype=float)[rows] for name, value in result.plant_state.items()}
+    return columns | logs | extra

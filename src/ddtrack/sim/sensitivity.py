@@ -17,7 +17,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
-from .integrators import rk4
+from ..integrators import rk4
+from ..layout import pose_vector
 
 
 @pytree_dataclass
@@ -41,7 +42,7 @@ class NominalPeriod:
             self.control_period,
             self.substeps,
         )
-        return end[:3]
+        return pose_vector(end)
 
     def jacobian(self, nu: Array, nu_c: Array, command_of: Callable[[Array], Any]) -> Array:
         """J_b = d increment / d nu_c (3x2), ``command_of(nu_c)`` building the held command: zero in a channel

@@ -9,11 +9,12 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from .._pytree import pytree_dataclass, static_field
 from ..geometry import posture_error
+from ..layout import BODY, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..precision import require_float64
 from ..trajectories import Trajectory
-from .integrators import rk4
 from .result import SimResult
 
 SCAN_UNROLL = 4
@@ -58,8 +59,8 @@ def plant_period(
 ) -> tuple[Array, Array]:
     """Advance the plant over one control period under the held input: the simulator's own step.
 
-    ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``substeps`` RK4 steps of
-    ``plant.derivative(., u, d)`` from ``plant.hold(x, u)`` over ``control_period``, both held (zero-order hold).
+    ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``plant.advance(x, u, d,
+    control_period, substeps)``, both held (zero-order hold; an ODE plant takes ``substeps`` RK4 steps).
     :func:`simulate` and the Gymnasium environment (``ddtrack.envs``) both call it, so they step alike.
 
     Parameters
@@ -67,7 +68,7 @@ def plant_period(
     plant
         a ``ddtrack.model.Plant``
     x
-        (5,) state x_k = [x, y, theta, v, omega] at t_k [m, m, rad, m/s, rad/s]
+        the plant's state x_k at t_k (its ``state_layout``)
     u
         (2,) plant input before saturation: wheel torques [N m], or (v, omega) for a kinematic plant
     t
@@ -79,7 +80,7 @@ def plant_period(
     control_period
         T_c [s]
     substeps
-        RK4 steps per period (static under ``jit``)
+        integration steps per period (static under ``jit``)
 
     Returns
     -------
@@ -88,12 +89,11 @@ def plant_period(
     """
     u = plant.saturate(u)
     tau_d = disturbance.torque(t, xi_disturbance)
-    x_next = rk4(lambda z: plant.derivative(z, u, tau_d), plant.hold(x, u), control_period, substeps)
-    return u, x_next
+    return u, plant.advance(x, u, tau_d, control_period, substeps)
 
 
 def period_status(
-    x: Array,
+    body: Array,
     x_next: Array,
     u: Array,
     error: Array,
@@ -105,11 +105,64 @@ def period_status(
     is not finite, else 1 (``diverged``) when the tracking error |(e_x, e_y)| of x_k exceeds
     ``divergence_error`` [m] or |v| [m/s] or |omega| [rad/s] of x_k exceeds ``divergence_speed``, else 0 (``ok``).
 
-    ``error`` is the posture error of x_k (model.md §2.2); ``u`` the saturated input (:func:`plant_period`).
+    ``body`` is x_k as the plant observes it (a :data:`~ddtrack.layout.BODY` vector, no noise), ``error`` its posture
+    error (model.md §2.2); ``u`` the saturated input (:func:`plant_period`).
     """
     finite = jnp.all(jnp.isfinite(x_next)) & jnp.all(jnp.isfinite(u))
-    too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(x[3:5]) > divergence_speed)
+    too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(velocity(body)) > divergence_speed)
     return jnp.where(finite, jnp.where(too_far, 1, 0), 2)
+
+
+@pytree_dataclass
+class ClosedLoop:
+    """One run's loop without its randomness: what a control period reads and never changes. Its :meth:`period` is
+    the one control period that :func:`simulate`'s scan and the Gymnasium environment (``ddtrack.envs``) both
+    step."""
+
+    plant: Any  #: a ``ddtrack.model.Plant``
+    controller: Any  #: a ``ddtrack.controllers.Controller``
+    trajectory: Any  #: a ``ddtrack.trajectories.Trajectory``
+    disturbance: WheelDisturbance
+    noise: MeasurementNoise
+    control_period: Array | float  #: T_c [s]
+    divergence_error: Array | float  #: [m]
+    divergence_speed: Array | float  #: [m/s] or [rad/s]
+    substeps: int = static_field(default=10)  #: integration steps per period
+
+    def period(
+        self, x: Array, memory: Any, status: Array, k: Array, xi_disturbance: Array, xi_noise: Array
+    ) -> tuple[Array, Any, Array, tuple[Array, Any, Array, Array, dict]]:
+        """Period k from plant state x_k, the controller's memory and the run's ``status`` so far (0 while it
+        runs): x_{k+1}, the next memory and status (both frozen once it failed), and what the period records:
+        the observed BODY state b_k, the reference, the posture error e_p(b_k, ref_k), the held input u_k and the
+        controller's logs (:func:`simulate`'s docstring)."""
+        t = k * self.control_period
+        ref = self.trajectory(t)
+        body = self.plant.observe(x)
+        y = self.noise.measure(body, xi_noise)
+        u, next_memory, logs = self.controller.step(t, y, ref, memory)
+        u, x_next = plant_period(
+            self.plant,
+            x,
+            u,
+            t,
+            xi_disturbance,
+            disturbance=self.disturbance,
+            control_period=self.control_period,
+            substeps=self.substeps,
+        )
+        error = posture_error(*pose(body), ref.x, ref.y, ref.theta)
+        new_status = jnp.where(
+            status == 0,
+            period_status(
+                body, x_next, u, error, divergence_error=self.divergence_error, divergence_speed=self.divergence_speed
+            ),
+            status,
+        )
+        keep = new_status == 0
+        x_next = jnp.where(keep, x_next, x)
+        next_memory = jax.tree_util.tree_map(lambda new, old: jnp.where(keep, new, old), next_memory, memory)
+        return x_next, next_memory, new_status, (body, ref, error, u, logs)
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
@@ -132,16 +185,18 @@ def simulate(
 
     One control period, exactly::
 
+        x_0 = plant.init(x0)
         for k in 0 .. N-1:                      t_k = k * T_c
             ref_k      = trajectory(t_k)
-            y_k        = x_k + noise_std * xi_k          what the controller sees
+            b_k        = plant.observe(x_k)              the BODY vector [x, y, theta, v, omega]
+            y_k        = b_k + noise_std * xi_k          what the controller sees
             u_k, m     = controller.step(t_k, y_k, ref_k, m)
             u_k, x_{k+1} = plant_period(plant, x_k, u_k, t_k, draw_k):
                 u_k      = plant.saturate(u_k)
                 d_k      = disturbance(t_k, draw_k)
-                x_{k+1}  = substeps x rk4(plant.derivative(., u_k, d_k), plant.hold(x_k, u_k), T_c / substeps)
-            status_k   = period_status(x_k, x_{k+1}, u_k, e_p(x_k, ref_k))
-            record x_k, ref_k, e_p(x_k, ref_k), u_k, logs_k
+                x_{k+1}  = plant.advance(x_k, u_k, d_k, T_c, substeps)
+            status_k   = period_status(b_k, x_{k+1}, u_k, e_p(b_k, ref_k))
+            record b_k, ref_k, e_p(b_k, ref_k), u_k, logs_k | plant.logged(x_k, u_k), the other states of x_k
 
     Failure is a status, never an exception: the first k with a non-finite control or next state
     sets ``non_finite``; the first k whose tracking error exceeds ``divergence_error`` [m], or whose
@@ -152,9 +207,10 @@ def simulate(
     ----------
     plant, controller, trajectory
         pytrees following their protocols (``ddtrack.model.Plant``,
-        ``ddtrack.controllers.Controller``, ``ddtrack.trajectories.Trajectory``)
+        ``ddtrack.controllers.Controller``, ``ddtrack.trajectories.Trajectory``); a controller that declares an
+        ``output_kind`` must match the plant's ``input_kind`` (a ValueError names both otherwise)
     x0
-        (5,) initial state [x, y, theta, v, omega]
+        (5,) initial BODY state [x, y, theta, v, omega], from which ``plant.init`` builds the plant's state
     draws
         the run's random draws (:class:`Draws`), shapes (n_steps, 2) and (n_steps, 5)
     n_steps
@@ -175,39 +231,40 @@ def simulate(
         index of the failing period (-1 when none)
     """
     require_float64()
-    x0 = jnp.asarray(x0, dtype=float)
-    memory0 = controller.init(x0, trajectory(0.0), draws.controller_key)
+    require_matching_input(plant, controller)
+    x0 = plant.init(jnp.asarray(x0, dtype=float))
+    memory0 = controller.init(plant.observe(x0), trajectory(0.0), draws.controller_key)
+
+    loop = ClosedLoop(
+        plant, controller, trajectory, disturbance, noise, control_period, divergence_error, divergence_speed, substeps
+    )
 
     def period(carry, inputs):
         x, memory, status, failure_index = carry
         k, xi_disturbance, xi_noise = inputs
-        t = k * control_period
-        ref = trajectory(t)
-        y = noise.measure(x, xi_noise)
-        u, next_memory, logs = controller.step(t, y, ref, memory)
-        u, x_next = plant_period(
-            plant, x, u, t, xi_disturbance, disturbance=disturbance, control_period=control_period, substeps=substeps
+        x_next, next_memory, new_status, (body, ref, error, u, logs) = loop.period(
+            x, memory, status, k, xi_disturbance, xi_noise
         )
-        error = posture_error(x[0], x[1], x[2], ref.x, ref.y, ref.theta)
-
-        running = status == 0
-        new_status = jnp.where(
-            running,
-            period_status(x, x_next, u, error, divergence_error=divergence_error, divergence_speed=divergence_speed),
-            status,
-        )
-        failure_index = jnp.where(running & (new_status != 0), k, failure_index)
-        keep = new_status == 0
-        x_next = jnp.where(keep, x_next, x)
-        next_memory = jax.tree_util.tree_map(lambda new, old: jnp.where(keep, new, old), next_memory, memory)
-        torques = {"tau_r": u[0], "tau_l": u[1]} if plant.input_kind == "torque" else {}
-        record = (x, ref, error, u, {name: jnp.asarray(value, float) for name, value in (logs | torques).items()})
+        failure_index = jnp.where((status == 0) & (new_status != 0), k, failure_index)
+        channels = logs | plant.logged(x, u)  # e.g. the torques a torque-driven plant applied
+        extra = {name: x[i] for i, name in enumerate(plant.state_layout.names) if name not in BODY.names}
+        record = (body, ref, error, u, {name: jnp.asarray(value, float) for name, value in channels.items()}, extra)
         return (x_next, next_memory, new_status, failure_index), record
 
     steps = jnp.arange(n_steps)
     carry0 = (x0, memory0, jnp.asarray(0), jnp.asarray(-1))
     # unroll=4: a third less per-step loop overhead on CPU at no compile cost (docs/benchmarks.md)
-    (_, _, status, failure_index), (states, refs, errors, controls, logs) = jax.lax.scan(
+    (_, _, status, failure_index), (states, refs, errors, controls, logs, extra) = jax.lax.scan(
         period, carry0, (steps, draws.disturbance, draws.noise), unroll=SCAN_UNROLL
     )
-    return SimResult(steps * control_period, states, refs, errors, controls, logs, status, failure_index)
+    return SimResult(steps * control_period, states, refs, errors, controls, logs, status, failure_index, extra)
+
+
+def require_matching_input(plant: Plant, controller: Any) -> None:
+    """A ValueError naming both sides when ``controller`` declares an ``output_kind`` that ``plant`` does not take."""
+    output = getattr(controller, "output_kind", None)
+    if output is not None and output != plant.input_kind:
+        raise ValueError(
+            f"{type(controller).__name__} outputs {output} commands but {type(plant).__name__} takes "
+            f"{plant.input_kind} ({', '.join(plant.input_layout.names)}): pair a {output}-driven plant with it"
+        )

@@ -10,6 +10,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass
 from ..geometry import wrap_angle
+from ..integrators import rk4_step_timed
 from .base import Reference
 
 
@@ -46,11 +47,7 @@ def unicycle_reference(
 
     def rk4(carry, _):
         t, q = carry
-        k1 = rate(t, q)
-        k2 = rate(t + h / 2, q + h / 2 * k1)
-        k3 = rate(t + h / 2, q + h / 2 * k2)
-        k4 = rate(t + h, q + h * k3)
-        return (t + h, q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)), None
+        return (t + h, rk4_step_timed(rate, t, q, h)), None
 
     def sample(carry, _):
         (t, q), _ = jax.lax.scan(rk4, carry, None, length=substeps)

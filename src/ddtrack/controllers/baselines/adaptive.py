@@ -51,6 +51,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..._pytree import FloatVector, pytree_dataclass
+from ...layout import velocity
 from ...model import RobotParams, reduced_input_inverse, reduced_mass, wheel_speeds
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
@@ -99,7 +100,7 @@ class AdaptiveComputedTorque:
         return jnp.clip(nominal_parameters(self.nominal), jnp.asarray(self.lower), jnp.asarray(self.upper))
 
     def torque(self, y: Array, command: VelocityCommand, memory: Array) -> tuple[Array, Array, Array]:
-        nu = y[3:5]
+        nu = velocity(y)
         error = nu - command.nu_c
         y_matrix = regressor(self.nominal, nu, command.nu_c, command.nu_c_dot)
         damping = reduced_mass(self.nominal) @ (jnp.asarray(self.kc) * error)

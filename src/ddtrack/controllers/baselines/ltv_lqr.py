@@ -24,12 +24,15 @@ smaller ``min_velocity`` costs about 3.3 more.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import jax
 import jax.numpy as jnp
 from jax import Array
 
 from ..._pytree import FloatVector, pytree_dataclass, static_field
 from ...geometry import error_rates, posture_error
+from ...layout import pose, velocity
 from ...trajectories import Reference
 from ..backstepping import clamp_command
 from ..base import Logs, VelocityCommand
@@ -94,6 +97,7 @@ class LTVUnicycleLQR:
     max_velocity: float = 2.0
     max_yaw_rate: float = 4.0
     dare_iterations: int = static_field(default=32)
+    output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
     def gain(self, v_r: Array) -> Array:
         """K(v_r), (2, 3): rows (dv, domega) per unit (e_x, e_y, e_theta)."""
@@ -107,10 +111,11 @@ class LTVUnicycleLQR:
         return ()
 
     def command(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[VelocityCommand, tuple[()], Logs]:
-        error = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)
+        error = posture_error(*pose(y), ref.x, ref.y, ref.theta)
         k = self.gain(ref.v)
         nu_c = jnp.stack([ref.v, ref.omega]) + k @ error
-        nu_c_dot = jnp.stack([ref.v_dot, ref.omega_dot]) + k @ error_rates(error, y[3], y[4], ref.v, ref.omega)
+        nu = velocity(y)
+        nu_c_dot = jnp.stack([ref.v_dot, ref.omega_dot]) + k @ error_rates(error, nu[0], nu[1], ref.v, ref.omega)
         limits = jnp.stack([jnp.asarray(self.max_velocity, float), jnp.asarray(self.max_yaw_rate, float)])
         nu_c, nu_c_dot, saturated = clamp_command(nu_c, nu_c_dot, limits)
         return VelocityCommand(nu_c, nu_c_dot, jnp.zeros(2), saturated), memory, {}

@@ -31,7 +31,7 @@ penalises large torques, and without it a zero-noise sample's cost is that of th
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -127,6 +127,7 @@ class MPPI:
     noise_std: FloatVector = (0.2, 0.2)
     samples: int = static_field(default=64)
     horizon: int = static_field(default=20)
+    output_kind: ClassVar[str] = "torque"  #: what it hands the plant
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> MPPIMemory:
         return MPPIMemory(jnp.zeros((self.horizon, 2)), key)

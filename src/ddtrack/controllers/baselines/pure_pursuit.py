@@ -61,6 +61,7 @@ from jax import Array
 
 from ..._pytree import pytree_dataclass, static_field
 from ...geometry import posture_error
+from ...layout import pose, pose_vector, position, velocity
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
@@ -148,20 +149,21 @@ class RegulatedPurePursuit:
         """The carrot [m], the lookahead L [m] and the sampled reference (fields of shape (M+1,))."""
         times = t + jnp.linspace(0.0, self.search_horizon, self.search_samples + 1)
         samples = jax.vmap(self.trajectory)(times)
-        lookahead = lookahead_distance(y[3], self.lookahead_time, self.min_lookahead, self.max_lookahead)
-        return find_carrot(jnp.stack([samples.x, samples.y], axis=1), y[0:2], lookahead), lookahead, samples
+        lookahead = lookahead_distance(velocity(y)[0], self.lookahead_time, self.min_lookahead, self.max_lookahead)
+        return find_carrot(jnp.stack([samples.x, samples.y], axis=1), position(y), lookahead), lookahead, samples
 
     def command(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[VelocityCommand, tuple[()], Logs]:
         carrot, lookahead, samples = self.carrot(t, y)
-        kappa, bearing = pursuit_curvature(carrot, y[0:3])
-        e_x = posture_error(y[0], y[1], y[2], ref.x, ref.y, ref.theta)[0]
+        kappa, bearing = pursuit_curvature(carrot, pose_vector(y))
+        e_x = posture_error(*pose(y), ref.x, ref.y, ref.theta)[0]
         paced = ref.v + self.pace_gain * e_x
         v_d = jnp.clip(paced, 0.0, self.max_velocity)
         v = jnp.maximum(curvature_regulation(v_d, kappa, self.min_radius), jnp.minimum(self.min_regulated_speed, v_d))
         # the goal is where the reference comes to rest, when that is near (Nav2: the path's end)
         steps = jnp.hypot(jnp.diff(samples.x), jnp.diff(samples.y))
         approaching = (samples.v[-1] <= 0.0) & (jnp.sum(steps) < self.approach_distance)
-        to_goal = jnp.hypot(samples.x[-1] - y[0], samples.y[-1] - y[1])
+        here = position(y)
+        to_goal = jnp.hypot(samples.x[-1] - here[0], samples.y[-1] - here[1])
         v = jnp.where(
             approaching, jnp.minimum(v, jnp.maximum(v * to_goal / self.approach_distance, self.min_approach_speed)), v
         )

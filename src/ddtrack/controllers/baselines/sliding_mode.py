@@ -29,6 +29,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..._pytree import FloatVector, pytree_dataclass
+from ...layout import velocity
 from ...model import RobotParams
 from ...trajectories import Reference
 from ..base import VelocityCommand
@@ -58,7 +59,7 @@ class SlidingModeTorque:
         return ()
 
     def torque(self, y: Array, command: VelocityCommand, memory: tuple[()]) -> tuple[Array, Array, tuple[()]]:
-        switching = switching_term(command.nu_c - y[3:5], self.switching_gain, self.boundary_layer)
+        switching = switching_term(command.nu_c - velocity(y), self.switching_gain, self.boundary_layer)
         # the switching term enters u of eq. 11 additively, so the nominal model, friction and limit are shared
         boosted = command._replace(feedback=command.feedback + switching)
         return ComputedTorque(self.nominal, kc=self.kc).torque(y, boosted, memory)

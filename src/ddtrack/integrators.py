@@ -1,0 +1,27 @@
+"""Fixed-step integration, low enough that plants, references and the simulator share it."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from jax import Array, lax
+
+
+def rk4_step_timed(f: Callable[[Array | float, Array], Array], t: Array | float, x: Array, h: Array | float) -> Array:
+    """One classical fourth-order Runge-Kutta step of x_dot = f(t, x) from ``t`` with step ``h`` (error O(h^4))."""
+    k1 = f(t, x)
+    k2 = f(t + 0.5 * h, x + 0.5 * h * k1)
+    k3 = f(t + 0.5 * h, x + 0.5 * h * k2)
+    k4 = f(t + h, x + h * k3)
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def rk4_step(f: Callable[[Array], Array], x: Array, h: Array | float) -> Array:
+    """One RK4 step of the autonomous x_dot = f(x) (:func:`rk4_step_timed`)."""
+    return rk4_step_timed(lambda _, z: f(z), 0.0, x, h)
+
+
+def rk4(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: int) -> Array:
+    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal RK4 steps (``steps`` is static)."""
+    h = duration / steps
+    return lax.fori_loop(0, steps, lambda _, z: rk4_step(f, z, h), x)

@@ -1,0 +1,116 @@
+"""Plants are read by their layouts: a plant with more states than BODY runs through a single run, a batch (what
+``mc`` runs) and the Gymnasium environment, and a controller whose output a plant does not take is refused."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import SCENARIOS
+
+import ddtrack
+from ddtrack._pytree import pytree_dataclass
+from ddtrack.layout import BODY, WHEEL_TORQUES, Layout, velocity
+from ddtrack.model import DynamicPlant, KinematicPlant, ODEPlant, RobotParams, wheel_speeds
+from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
+
+SHORT = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
+
+
+@pytree_dataclass
+class WheelAnglePlant(ODEPlant):
+    """The Lagrangian robot with its wheel angles (phi_r, phi_l) [rad] as two more states: 7 in all."""
+
+    params: RobotParams
+    state_layout: ClassVar[Layout] = Layout((*BODY.names, "phi_r", "phi_l"), (*BODY.units, "rad", "rad"))
+    logged_layout: ClassVar[Layout] = WHEEL_TORQUES
+
+    def init(self, body):
+        return jnp.concatenate([body, jnp.zeros(2)])  # the wheels start at angle 0
+
+    def observe(self, x):
+        return x[:5]
+
+    def derivative(self, x, u, tau_dist):
+        body = DynamicPlant(self.params).derivative(x[:5], u, tau_dist)
+        return jnp.concatenate([body, wheel_speeds(self.params, velocity(x))])
+
+    def saturate(self, u):
+        return DynamicPlant(self.params).saturate(u)
+
+    def logged(self, x, u):
+        return WHEEL_TORQUES.columns(u)
+
+
+def scenario():
+    return ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=SHORT)
+
+
+def test_a_seven_state_plant_runs_alone_and_matches_the_five_state_robot():
+    paper = scenario()
+    setup, draws = prepare(paper)
+    five = ddtrack.timeseries(run_setup(paper, setup, draws))
+    seven = ddtrack.timeseries(run_setup(paper, dataclasses.replace(setup, plant_model=WheelAnglePlant), draws))
+    assert set(seven) - set(five) == {"phi_r", "phi_l"}  # its own states, by their names; the rest unchanged
+    for name in five:  # the wheel angles feed nothing back, so the robot moves as the 5-state one does
+        np.testing.assert_allclose(seven[name], five[name], rtol=1e-12, atol=1e-12, err_msg=name)
+    # each wheel turned by the integral of its speed (v +- L omega) / r (trapezoids of the recorded speeds)
+    params = setup.plant_params
+    for name, sign in (("phi_r", 1.0), ("phi_l", -1.0)):
+        speed = (five["v"] + sign * float(params.half_axle) * five["omega"]) / float(params.wheel_radius)
+        turned = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(five["t"]))])
+        assert seven[name][0] == 0.0
+        np.testing.assert_allclose(seven[name], turned, atol=2e-3 * np.max(np.abs(turned)), err_msg=name)
+    assert np.max(np.abs(seven["phi_r"])) > 1.0  # it did turn
+
+
+def test_a_seven_state_plant_runs_as_a_batch():
+    paper = scenario()
+    setup, draws = prepare_batch(paper, [0, 1, 2])
+    seven = dataclasses.replace(setup, plant_model=WheelAnglePlant)
+    result = run_setup(paper, seven, draws, batched=True)
+    assert result.state.shape[0] == 3 and result.state.shape[-1] == 5  # BODY rows, whatever the plant
+    assert set(result.plant_state) == {"phi_r", "phi_l"} and result.plant_state["phi_r"].shape == result.t.shape
+    five, seven_rows = batch_metrics(paper, setup, draws), batch_metrics(paper, seven, draws)
+    for a, b in zip(five, seven_rows, strict=True):
+        assert b["e_tr_mean"] == pytest.approx(a["e_tr_mean"], rel=1e-12)
+
+
+def test_a_seven_state_plant_runs_in_the_environment():
+    from gymnasium.utils.env_checker import check_env
+
+    from ddtrack.envs import DiffDriveTrackingEnv
+
+    env = DiffDriveTrackingEnv(scenario(), action_mode="gains", plant_model=WheelAnglePlant)
+    check_env(env, skip_render_check=True)
+    reference = DiffDriveTrackingEnv(scenario(), action_mode="gains")
+    for e in (env, reference):
+        e.reset(seed=3)
+    for _ in range(20):
+        observation, reward, *_, info = env.step(np.zeros(3))
+        expected, expected_reward, *_ = reference.step(np.zeros(3))
+        np.testing.assert_allclose(observation, expected, rtol=1e-6)
+        assert info["state"].shape == (5,) and reward == pytest.approx(expected_reward, rel=1e-9)
+    assert env._x.shape == (7,) and float(env._x[5]) != 0.0  # the environment carries the plant's whole state
+
+
+def test_a_controller_the_plant_cannot_take_is_refused_when_assembled():
+    setup, _ = prepare(scenario())
+    with pytest.raises(ValueError, match="Backstepping outputs velocity commands but DynamicPlant takes torque"):
+        dataclasses.replace(setup, controller=ddtrack.controllers.Backstepping())
+    with pytest.raises(ValueError, match="Cascade outputs torque commands but KinematicPlant takes velocity"):
+        ddtrack.simulate(
+            KinematicPlant(), setup.controller, setup.trajectory, setup.x0, ddtrack.sim.Draws.zeros(5), n_steps=5
+        )
+
+
+def test_layouts_name_their_channels():
+    assert BODY.index("omega") == 4 and BODY.unit("v") == "m/s" and len(WheelAnglePlant.state_layout) == 7
+    assert DynamicPlant(RobotParams()).input_kind == "torque" and KinematicPlant().input_kind == "velocity"
+    with pytest.raises(ValueError, match="no channel 'v_x'"):
+        BODY.index("v_x")
+    with pytest.raises(ValueError, match="one unit per name"):
+        Layout(("a", "a"), ("m", "m"))
