@@ -13,7 +13,7 @@ seed's initial weights, and what is timed is the control loop itself, online tra
 The loop (docs/model.md §2.7), per robot and control period k, t_k = k T_c:
 
 * reference: the line at constant speed (docs/model.md §2.1);
-* measurement y_k = x_k + noise_std * xi_k (docs/model.md §4.1);
+* measurement y_k = x_k + noise_std * xi_k (docs/model.md §2.7);
 * (a) backstepping: posture error (§2.2), Kanayama law (§2.4), its analytic rate and the velocity clamps (§2.5),
   computed torque on the nominal model with the torque limit (§2.5);
   (b) NN-adaptive backstepping (§3, pseudo-code §3.8): one momentum-SGD step of the emulator on the last
@@ -35,7 +35,7 @@ Timing, all in this one process: ddtrack's ``runner.batch_metrics`` (the path of
 ``bench/batch.py``: the vmapped simulation sharded over ``--threads`` JAX CPU devices, then the metrics on the host)
 and, separately, its jitted simulation alone (the same sharded call without the host metrics); the Numba loop with
 ``prange`` over robots on ``--threads`` threads. Compile excluded for both (one warm-up call; Numba's JIT compile
-time is reported on its own); the median of ``--repeats`` calls. ``--quick`` runs a 10 s horizon on small batches.
+time is reported on its own); the median of ``--repeats`` calls. ``--quick`` runs a 10 s horizon on a batch of 16.
 """
 
 from __future__ import annotations
