@@ -18,9 +18,10 @@ Action modes
     K = K0 (gain_max / K0)^a for a >= 0, K0 (K0 / gain_min)^a for a < 0.
     The bounds are the NN-adaptive defaults (0.1, 1, 0.1) .. (10, 600, 60) (``NNAdaptiveConfig``), or an
     ``nn_adaptive_backstepping`` scenario's own ``gain_min``/``gain_max``, widened to contain K0.
-    Allowed controllers: ``backstepping``, ``sliding_mode_backstepping``, ``adaptive_backstepping``,
-    ``kinematic_backstepping`` (whose outer law is Kanayama's) and ``nn_adaptive_backstepping``, which is
-    run as plain ``backstepping`` with its gains and inner loop (the policy replaces its gain law).
+    Allowed controllers: those registered with Kanayama gains (:func:`gains_controllers`): ``backstepping``,
+    ``sliding_mode_backstepping``, ``adaptive_backstepping``, ``kinematic_backstepping``, a plugin's that declares
+    them, and ``nn_adaptive_backstepping``, which is run as plain ``backstepping`` with its gains and inner loop
+    (the policy replaces its gain law).
 
 Actions outside [-1, 1] are clipped (``Box`` actions are normalised, as Gymnasium recommends).
 
