@@ -46,6 +46,7 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .runner import run_batch as run_batch
     from .scenario import Scenario as Scenario
     from .scenario import load_scenario as load_scenario
+    from .scenario import register_controller as register_controller
     from .scenario import validate_scenario as validate_scenario
     from .sim import Draws as Draws
     from .sim import SimResult as SimResult
@@ -66,6 +67,7 @@ _SOURCES = {
     "run": "runner",
     "run_batch": "runner",
     "Scenario": "scenario",
+    "register_controller": "scenario",
     "load_scenario": "scenario",
     "validate_scenario": "scenario",
     "Draws": "sim",

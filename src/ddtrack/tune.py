@@ -33,11 +33,12 @@ from .errors import ConfigError
 from .metrics import window_mask
 from .outdir import atomic_write
 from .runner import prepare_batch
-from .scenario import Scenario, Setup
+from .scenario import Scenario, Setup, tunable_kinds
 from .sim import Draws, simulate_batch
 
-#: controllers whose gains can be tuned: kind -> the outer law's gain fields, in the scenario's ``gains`` order
-TUNABLE = {"backstepping": ("kx", "ky", "ktheta")}
+#: the fields of the outer law that the tuned gains replace, in the scenario's ``gains`` order; the kinds whose
+#: gains can be tuned are the registry's (:func:`ddtrack.scenario.tunable_kinds`: differentiable, Kanayama, torque)
+GAIN_FIELDS = ("kx", "ky", "ktheta")
 #: Gamma of eq. 22 by default: (1, 1, 0) makes J_k = e_tr^2 / 2, the tracking error the metrics and Table 1 score.
 #: The NN gain law's own (1, 50, 1) weighs the lateral error 50 times: tuned on it, backstepping trades a longer
 #: along-track lag for a smaller lateral error and ends with a larger e_tr (docs/tuning.md).
@@ -66,12 +67,13 @@ class TuneResult(NamedTuple):
 
 def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Problem]:
     """Each training scenario prepared once for all the seeds (one vmapped batch each)."""
+    tunable = tunable_kinds()
     for scenario in scenarios:
-        if scenario.controller.kind not in TUNABLE:
+        if scenario.controller.kind not in tunable:
             raise ConfigError(
                 "--controller",
                 f"'{scenario.controller.kind}' has no tunable gains here",
-                f"tune one of: {', '.join(TUNABLE)}",
+                f"tune one of: {', '.join(tunable)}",
             )
     return [
         Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
@@ -85,7 +87,7 @@ def rollout_loss(
     """Mean over the batch's runs of sum_k (J_k (eq. 22) + effort_weight |tau_k|^2) T_c, over the metric window
     (or the whole run)."""
     sim = problem.scenario.simulation
-    fields = TUNABLE[problem.scenario.controller.kind]
+    fields = GAIN_FIELDS
     controller = problem.setup.controller
     runs = len(problem.setup.x0)
     outer = dataclasses.replace(

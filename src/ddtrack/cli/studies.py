@@ -207,13 +207,13 @@ def tune(
     """Tune a controller's constant gains by gradient descent through whole simulated rollouts of SCENARIO...
     (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
     from ..outdir import check_output, staged_folder
-    from ..scenario import kanayama_gains, load_scenario
-    from ..tune import TUNABLE, problems, write
+    from ..scenario import kanayama_gains, load_scenario, tunable_kinds
+    from ..tune import problems, write
     from ..tune import tune as run_tuning
 
-    if controller not in TUNABLE:
+    if controller not in tunable_kinds():
         raise ConfigError(
-            "--controller", f"'{controller}' has no tunable gains", f"choose one of: {', '.join(TUNABLE)}"
+            "--controller", f"'{controller}' has no tunable gains", f"choose one of: {', '.join(tunable_kinds())}"
         )
     if min(gamma) < 0 or max(gamma) == 0:
         raise ConfigError("--gamma", f"{gamma} must be >= 0 and not all 0", "e.g. --gamma 1 1 0 (the squared e_tr)")

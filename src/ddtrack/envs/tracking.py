@@ -18,9 +18,10 @@ Action modes
     K = K0 (gain_max / K0)^a for a >= 0, K0 (K0 / gain_min)^a for a < 0.
     The bounds are the NN-adaptive defaults (0.1, 1, 0.1) .. (10, 600, 60) (``NNAdaptiveConfig``), or an
     ``nn_adaptive_backstepping`` scenario's own ``gain_min``/``gain_max``, widened to contain K0.
-    Allowed controllers: ``backstepping``, ``sliding_mode_backstepping``, ``adaptive_backstepping``,
-    ``kinematic_backstepping`` (whose outer law is Kanayama's) and ``nn_adaptive_backstepping``, which is
-    run as plain ``backstepping`` with its gains and inner loop (the policy replaces its gain law).
+    Allowed controllers: those registered with Kanayama gains (:func:`gains_controllers`): ``backstepping``,
+    ``sliding_mode_backstepping``, ``adaptive_backstepping``, ``kinematic_backstepping``, a plugin's that declares
+    them, and ``nn_adaptive_backstepping``, which is run as plain ``backstepping`` with its gains and inner loop
+    (the policy replaces its gain law).
 
 Actions outside [-1, 1] are clipped (``Box`` actions are normalised, as Gymnasium recommends).
 
@@ -78,19 +79,19 @@ from gymnasium import spaces
 from jax import Array
 
 from .._pytree import pytree_dataclass
-from ..controllers import Backstepping
+from ..controllers import Cascade
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
 from ..layout import pose, velocity
 from ..precision import enable_float64
 from ..runner import prepare
 from ..scenario import (
-    KANAYAMA_KINDS,
     BacksteppingConfig,
     NNAdaptiveConfig,
     Scenario,
     Setup,
     kanayama_gains,
+    kanayama_kinds,
     load_scenario,
 )
 from ..shipped import scenario_path
@@ -100,7 +101,6 @@ ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
 GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
-GAINS_CONTROLLERS = tuple(KANAYAMA_KINDS)  #: kinds whose outer law is Kanayama's
 RESET_OPTIONS = ("initial_pose",)
 
 
@@ -183,7 +183,7 @@ def _step(
     if gains_mode:
         gains = _gains(episode, action)
         controller = episode.controller
-        if isinstance(controller, Backstepping):  # the kinematic baseline: the law alone
+        if not isinstance(controller, Cascade):  # a velocity output (kinematic backstepping): the law alone
             controller = dataclasses.replace(controller, kx=gains[0], ky=gains[1], ktheta=gains[2])
         else:
             outer = dataclasses.replace(controller.outer, kx=gains[0], ky=gains[1], ktheta=gains[2])
@@ -432,6 +432,11 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         return np.clip(action, -1.0, 1.0)
 
 
+def gains_controllers() -> tuple[str, ...]:
+    """The kinds gains mode accepts: those registered with Kanayama gains (:func:`ddtrack.register_controller`)."""
+    return tuple(kanayama_kinds())
+
+
 def scenario_gain_bounds(scenario: Scenario) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """(gain_min, gain_max) of gains mode: an NN-adaptive scenario's own, else the NN-adaptive defaults."""
     if isinstance(scenario.controller, NNAdaptiveConfig):
@@ -454,12 +459,12 @@ def _scenario_for(scenario: Scenario, action_mode: str) -> Scenario:
     """The scenario the environment runs: gains mode needs a Kanayama outer law; NN-adaptive becomes backstepping."""
     if action_mode != "gains":
         return scenario
-    config = scenario.controller
-    if config.kind not in GAINS_CONTROLLERS:
+    config, allowed = scenario.controller, gains_controllers()
+    if config.kind not in allowed:
         raise ConfigError(
             "action_mode",
             f"'gains' sets the gains of Kanayama backstepping, and this scenario's controller.kind is {config.kind!r}",
-            f"use action_mode='torque', or one of {', '.join(GAINS_CONTROLLERS)}",
+            f"use action_mode='torque', or one of {', '.join(allowed)}",
         )
     if isinstance(config, NNAdaptiveConfig):  # the policy replaces the gradient law; gains and inner loop stay
         shared = {name: getattr(config, name) for name in BacksteppingConfig.model_fields if name != "kind"}

@@ -20,23 +20,19 @@ from ._base import Position as Position
 from ._base import Positive as Positive
 from ._base import _Section as _Section
 from ._base import read_input as read_input
-from .baseline_configs import KANAYAMA_KINDS as KANAYAMA_KINDS
 from .baseline_configs import AdaptiveBacksteppingConfig as AdaptiveBacksteppingConfig
-from .baseline_configs import ControllerConfig as ControllerConfig
-from .baseline_configs import KanayamaControllerConfig as KanayamaControllerConfig
 from .baseline_configs import KinematicBacksteppingConfig as KinematicBacksteppingConfig
 from .baseline_configs import LTVLQRConfig as LTVLQRConfig
 from .baseline_configs import MPPIConfig as MPPIConfig
 from .baseline_configs import RegulatedPurePursuitConfig as RegulatedPurePursuitConfig
 from .baseline_configs import SlidingModeConfig as SlidingModeConfig
-from .baseline_configs import kanayama_gains as kanayama_gains
 from .build import Setup as Setup
 from .build import build as build
 from .build import to_toml_dict as to_toml_dict
 from .controller_configs import BacksteppingConfig as BacksteppingConfig
+from .controller_configs import InnerLoopConfig as InnerLoopConfig
 from .controller_configs import NNAdaptiveConfig as NNAdaptiveConfig
 from .controller_configs import PositiveTriple as PositiveTriple
-from .document import CONTROLLERS as CONTROLLERS
 from .document import DISTURBANCES as DISTURBANCES
 from .document import TRAJECTORIES as TRAJECTORIES
 from .document import Scenario as Scenario
@@ -46,6 +42,15 @@ from .files import load_scenario as load_scenario
 from .files import read_toml as read_toml
 from .files import switch_controller as switch_controller
 from .files import validate_scenario as validate_scenario
+from .registry import CONTROLLERS as CONTROLLERS
+from .registry import ControllerConfig as ControllerConfig
+from .registry import ControllerKind as ControllerKind
+from .registry import controller_kind as controller_kind
+from .registry import controller_kinds as controller_kinds
+from .registry import kanayama_gains as kanayama_gains
+from .registry import kanayama_kinds as kanayama_kinds
+from .registry import register_controller as register_controller
+from .registry import tunable_kinds as tunable_kinds
 from .sections import ConstantDisturbance as ConstantDisturbance
 from .sections import DisturbanceConfig as DisturbanceConfig
 from .sections import GaussianDisturbance as GaussianDisturbance
@@ -75,8 +80,11 @@ __all__ = [
     "Setup",
     "apply_override",
     "build",
+    "controller_kind",
+    "controller_kinds",
     "load_scenario",
     "read_waypoints",
+    "register_controller",
     "summary",
     "to_toml_dict",
     "validate_scenario",

@@ -22,9 +22,9 @@ Length = Annotated[float, Field(gt=0.0, le=MAX_COORDINATE)]
 class FieldError(ValueError):
     """A validator's error about one field of its section (so the message names ``section.field``)."""
 
-    def __init__(self, field: str, message: str) -> None:
+    def __init__(self, field: str, message: str, hint: str = "") -> None:
         super().__init__(message)
-        self.field = field
+        self.field, self.hint = field, hint
 
 
 MAX_CONTROL_PERIODS = 2_000_000  # about 0.5 GB of recorded series; longer runs belong in chunks

@@ -1,11 +1,8 @@
-"""The ``[controller]`` section of the baseline controllers, the union of every controller kind, and the gains of
-those whose outer law is Kanayama's.
-"""
+"""The ``[controller]`` section of the baseline controllers (registered with the others in ``registry``)."""
 
 from __future__ import annotations
 
 import math
-import typing
 from typing import Annotated, Literal
 
 import jax
@@ -23,7 +20,6 @@ from ..controllers.baselines import (
     RegulatedPurePursuit,
     SlidingModeTorque,
 )
-from ..errors import ConfigError
 from ..model import RobotParams
 from ..trajectories import Trajectory
 from ._base import (
@@ -32,7 +28,7 @@ from ._base import (
     Positive,
     _Section,
 )
-from .controller_configs import BacksteppingConfig, NNAdaptiveConfig, PositiveTriple, _InnerLoopConfig
+from .controller_configs import PositiveTriple, _InnerLoopConfig
 
 
 class LTVLQRConfig(_InnerLoopConfig):
@@ -332,34 +328,3 @@ class MPPIConfig(_Section):
             samples=self.samples,
             horizon=self.horizon,
         )
-
-
-ControllerConfig = Annotated[
-    BacksteppingConfig
-    | NNAdaptiveConfig
-    | LTVLQRConfig
-    | SlidingModeConfig
-    | KinematicBacksteppingConfig
-    | RegulatedPurePursuitConfig
-    | AdaptiveBacksteppingConfig
-    | MPPIConfig,
-    Field(discriminator="kind"),
-]
-
-#: the controllers whose outer law is Kanayama's, so that they have gains (Kx, Ky, Ktheta)
-KanayamaControllerConfig = (
-    BacksteppingConfig | NNAdaptiveConfig | SlidingModeConfig | KinematicBacksteppingConfig | AdaptiveBacksteppingConfig
-)
-
-
-#: the ``kind`` of each of them, in the union's order
-KANAYAMA_KINDS = [
-    typing.get_args(m.model_fields["kind"].annotation)[0] for m in typing.get_args(KanayamaControllerConfig)
-]
-
-
-def kanayama_gains(config: ControllerConfig) -> tuple[float, float, float]:
-    """(Kx, Ky, Ktheta) of a controller with Kanayama's outer law; a ConfigError naming ``controller.kind`` if not."""
-    if isinstance(config, KanayamaControllerConfig):
-        return config.gains
-    raise ConfigError("controller.kind", f"'{config.kind}' has no Kanayama gains (Kx, Ky, Ktheta)")

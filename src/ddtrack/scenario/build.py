@@ -15,12 +15,8 @@ from ..controllers import (
 from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from ..sim import require_matching_input
 from ..trajectories import Trajectory
-from .baseline_configs import (
-    KinematicBacksteppingConfig,
-    MPPIConfig,
-    RegulatedPurePursuitConfig,
-)
 from .document import Scenario
+from .registry import controller_kind
 
 # --- runtime objects -------------------------------------------------------------------------------
 
@@ -66,8 +62,9 @@ def build(
         pose = scenario.initial.pose
     x0 = jnp.asarray([*pose, *scenario.initial.velocity], dtype=float)
     config, key = scenario.controller, controller_key if controller_key is not None else jax.random.PRNGKey(0)
+    kind = controller_kind(config.kind)
     controller: Controller
-    if isinstance(config, (RegulatedPurePursuitConfig, MPPIConfig)):  # they look ahead along the reference itself
+    if kind.needs_reference:  # it looks ahead along the reference itself
         controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
     else:
         controller = config.build(nominal, sim.control_period, key)
@@ -79,7 +76,7 @@ def build(
         x0=x0,
         disturbance=scenario.disturbance.build(),
         noise=scenario.noise.build(),
-        kinematic=isinstance(config, KinematicBacksteppingConfig),
+        kinematic=kind.output == "velocity",
     )
 
 

@@ -96,6 +96,7 @@ class BacksteppingConfig(_KanayamaConfig):
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
+InnerLoopConfig = _InnerLoopConfig  #: public name, for a plugin's config over the shared inner loop (docs/plugins.md)
 PositiveTriple = tuple[Positive, Positive, Positive]
 
 

@@ -12,10 +12,8 @@ from ._base import (
     FieldError,
     _Section,
 )
-from .baseline_configs import (
-    ControllerConfig,
-)
 from .controller_configs import BacksteppingConfig
+from .registry import ControllerConfig, ControllerField
 from .sections import (
     DisturbanceConfig,
     InitialConfig,
@@ -60,7 +58,7 @@ class Scenario(_Section):
     noise: NoiseConfig = NoiseConfig()
     trajectory: TrajectoryConfig
     initial: InitialConfig = InitialConfig()
-    controller: ControllerConfig = BacksteppingConfig(kind="backstepping")
+    controller: Annotated[ControllerConfig, ControllerField()] = BacksteppingConfig(kind="backstepping")
 
     @model_validator(mode="after")
     def _draws_keep_parameters_physical(self) -> Scenario:
@@ -103,7 +101,6 @@ def _registry(union: Any) -> dict[str, type[BaseModel]]:
 
 TRAJECTORIES = _registry(TrajectoryConfig)
 DISTURBANCES = _registry(DisturbanceConfig)
-CONTROLLERS = _registry(ControllerConfig)
 
 
 def summary(model: type[BaseModel]) -> str:

@@ -20,7 +20,8 @@ from ._base import (
     FieldError,
     read_input,
 )
-from .document import CONTROLLERS, Scenario
+from .document import Scenario
+from .registry import CONTROLLERS, InvalidController
 
 # --- loading --------------------------------------------------------------------------------------
 
@@ -164,11 +165,14 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     node[keys[-1]] = value
 
 
-def _config_error(exc: ValidationError) -> ConfigError:
+def _config_error(exc: ValidationError, root: type[BaseModel] = Scenario, prefix: Sequence[str] = ()) -> ConfigError:
     """Turn pydantic's first error into a one-line message with the field path and a hint."""
     error = exc.errors()[0]
-    model, path = _walk(error["loc"])
+    model, path = _walk(error["loc"], root)
+    path = [*prefix, *path]
     cause = error.get("ctx", {}).get("error")
+    if isinstance(cause, InvalidController):  # the controller's own model failed: follow its error inside it
+        return _config_error(cause.errors, cause.config, path)
     if isinstance(cause, FieldError):
         path.append(cause.field)
     field = ".".join(path).replace(".[", "[")
@@ -191,13 +195,13 @@ def _config_error(exc: ValidationError) -> ConfigError:
         return ConfigError(field, "must be a finite number (got NaN or inf)")
     got = error.get("input")
     shown = "" if isinstance(got, dict) or kind.startswith("value_error") else f" (got {got!r:.60})"
-    return ConfigError(field, message + shown)
+    return ConfigError(field, message + shown, cause.hint if isinstance(cause, FieldError) else "")
 
 
-def _walk(loc: Iterable[Any]) -> tuple[type[BaseModel] | None, list[str]]:
-    """Follow a pydantic error location through the models; drop union tags from the path."""
-    model: Any = Scenario
-    parent: type[BaseModel] | None = Scenario
+def _walk(loc: Iterable[Any], root: type[BaseModel]) -> tuple[type[BaseModel] | None, list[str]]:
+    """Follow a pydantic error location through the models from ``root``; drop union tags from the path."""
+    model: Any = root
+    parent: type[BaseModel] | None = root
     path: list[str] = []
     for part in loc:
         if isinstance(model, dict):  # a discriminated union: the part is the tag

@@ -1,0 +1,138 @@
+"""The controller registry: a kind registered from Python or by a pip-installed plugin is usable by name, and the
+capabilities it declares are the ones tune, the build and the environment's gains mode go by."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tomllib
+from typing import Literal
+
+import pytest
+import tomli_w
+from conftest import ROOT, SCENARIOS
+from pydantic import Field
+
+import ddtrack
+from ddtrack.controllers import Backstepping, Cascade
+from ddtrack.scenario import InnerLoopConfig, Positive, controller_kinds, registry
+
+SHORT = ["simulation.duration=3", "simulation.metric_window=[1, 3]", "initial.pose=[0, 0.3, 0]"]
+
+
+class TestKanayamaConfig(InnerLoopConfig):
+    """Kanayama backstepping registered by a test."""
+
+    __test__ = False  # not a test class, whatever its name
+    kind: Literal["test_kanayama"]
+    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
+
+    def build(self, nominal, control_period, key):
+        kx, ky, ktheta = self.gains
+        return Cascade(Backstepping(kx=kx, ky=ky, ktheta=ktheta), self.build_inner(nominal, control_period))
+
+
+@pytest.fixture
+def registered():
+    """Register ``test_kanayama`` (Kanayama gains, not differentiable) for one test, and forget it after."""
+    ddtrack.register_controller(TestKanayamaConfig, has_kanayama_gains=True)
+    yield
+    del registry._KINDS["test_kanayama"]  # the golden and determinism tests go over every registered kind
+
+
+def _scenario_file(tmp_path, kind: str):
+    data = tomllib.loads((SCENARIOS / "paper_line.toml").read_text())
+    data["controller"] = {"kind": kind}
+    path = tmp_path / "scenario.toml"
+    path.write_text(tomli_w.dumps(data))
+    return path
+
+
+def test_a_kind_registered_from_python_runs_by_name(registered, tmp_path):
+    scenario = ddtrack.load_scenario(_scenario_file(tmp_path, "test_kanayama"), overrides=SHORT)
+    assert isinstance(scenario.controller, TestKanayamaConfig)
+    result = ddtrack.run(scenario)
+    mine = ddtrack.run(ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=SHORT))
+    assert result.status_name == "ok"
+    # the same law and inner loop as the built-in backstepping: the same run
+    assert float(abs(result.state - mine.state).max()) < 1e-9
+    assert "test_kanayama" in ddtrack.scenario.CONTROLLERS and ddtrack.scenario.kanayama_kinds()[-1] == "test_kanayama"
+    with pytest.raises(
+        ddtrack.ConfigError, match=r"(?s)controller.kind: unknown kind 'test_kanayma'.*did you mean 'test_kanayama'"
+    ):
+        ddtrack.load_scenario(_scenario_file(tmp_path, "test_kanayma"))
+
+
+def test_registration_checks_the_config():
+    with pytest.raises(TypeError, match="kind"):
+        ddtrack.register_controller(Positive)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="already registered"):
+
+        class Other(TestKanayamaConfig):
+            kind: Literal["backstepping"]
+
+        ddtrack.register_controller(Other)
+
+
+def test_tune_goes_by_the_registry(registered, tmp_path):
+    from ddtrack.tune import problems
+
+    assert ddtrack.scenario.tunable_kinds() == ["backstepping"]  # differentiable, Kanayama, torque
+    scenario = ddtrack.load_scenario(_scenario_file(tmp_path, "test_kanayama"), overrides=SHORT)
+    with pytest.raises(ddtrack.ConfigError, match="(?s)'test_kanayama' has no tunable gains.*backstepping"):
+        problems([scenario], [0])
+
+
+def test_gains_mode_takes_exactly_the_kinds_with_kanayama_gains(registered, tmp_path):
+    from ddtrack.envs.tracking import _scenario_for, gains_controllers
+
+    with_gains = [name for name, kind in controller_kinds().items() if kind.has_kanayama_gains]
+    assert list(gains_controllers()) == with_gains and "test_kanayama" in with_gains
+    for name in controller_kinds():
+        scenario = ddtrack.load_scenario(_scenario_file(tmp_path, name), overrides=SHORT)
+        if name in with_gains:
+            _scenario_for(scenario, "gains")
+        else:
+            with pytest.raises(ddtrack.ConfigError, match="action_mode"):
+                _scenario_for(scenario, "gains")
+
+
+def test_a_broken_plugin_is_named_not_a_traceback(tmp_path):
+    info = tmp_path / "broken_plugin-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: broken-plugin\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[ddtrack.controllers]\nbroken = no_such_module:register\n")
+    env = os.environ | {"PYTHONPATH": str(tmp_path)}
+    done = subprocess.run(
+        [sys.executable, "-m", "ddtrack", "list"], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 2, done.stderr
+    assert "plugin 'broken' (from broken-plugin)" in done.stderr and "no_such_module" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_the_example_plugin_installs_and_runs_through_mc(tmp_path):
+    target = tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index"]
+        + ["--target", str(target), str(ROOT / "examples" / "plugin")],
+        check=True,
+        timeout=300,
+    )
+    env = os.environ | {"PYTHONPATH": str(target)}
+    listed = subprocess.run(
+        [sys.executable, "-m", "ddtrack", "list", "controllers"], capture_output=True, text=True, env=env
+    )
+    assert "integral_kanayama" in listed.stdout, listed.stderr
+    out = tmp_path / "mc"
+    command = [sys.executable, "-m", "ddtrack", "mc", str(_scenario_file(tmp_path, "integral_kanayama")), "-n", "3"]
+    command += ["--controllers", "integral_kanayama,backstepping", "--out", str(out)]
+    done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    means = json.loads((out / "summary.json").read_text())["controllers"]
+    integral, baseline = (means[name]["e_tr_mean"]["mean"] for name in ("integral_kanayama", "backstepping"))
+    assert baseline == pytest.approx(0.046, abs=0.002)  # the paper's line case
+    assert integral < baseline / 5  # the integral removes the friction-induced lag
