@@ -1,59 +1,49 @@
-"""Plants are read by their layouts: a plant with more states than BODY runs through a single run, a batch (what
-``mc`` runs) and the Gymnasium environment, and a controller whose output a plant does not take is refused."""
+"""Plants are read by their layouts: a plant with more states than BODY, registered by name, runs through a single
+run, a batch (what ``mc`` runs) and the Gymnasium environment (and, installed as a plugin, through ``ddtrack run``
+and ``mc``: test_plugins.py), and a controller whose output a plant does not take is refused."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+import sys
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import SCENARIOS
+from conftest import ROOT, SCENARIOS
 
 import ddtrack
-from ddtrack._pytree import pytree_dataclass
-from ddtrack.layout import BODY, WHEEL_TORQUES, Layout, velocity
-from ddtrack.model import DynamicPlant, KinematicPlant, ODEPlant, RobotParams, wheel_speeds
+from ddtrack.layout import BODY, Layout
+from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams
 from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
+from ddtrack.scenario import registry
+
+sys.path.insert(0, str(ROOT / "examples" / "plugin" / "src"))  # the example plugin, as installed
+from ddtrack_integral_kanayama import wheel_angles
+from ddtrack_integral_kanayama.wheel_angles import WheelAnglePlant
 
 SHORT = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
 
 
-@pytree_dataclass
-class WheelAnglePlant(ODEPlant):
-    """The Lagrangian robot with its wheel angles (phi_r, phi_l) [rad] as two more states: 7 in all."""
-
-    params: RobotParams
-    state_layout: ClassVar[Layout] = Layout((*BODY.names, "phi_r", "phi_l"), (*BODY.units, "rad", "rad"))
-    logged_layout: ClassVar[Layout] = WHEEL_TORQUES
-
-    def init(self, body):
-        return jnp.concatenate([body, jnp.zeros(2)])  # the wheels start at angle 0
-
-    def observe(self, x):
-        return x[:5]
-
-    def derivative(self, x, u, tau_dist):
-        body = DynamicPlant(self.params).derivative(x[:5], u, tau_dist)
-        return jnp.concatenate([body, wheel_speeds(self.params, velocity(x))])
-
-    def saturate(self, u):
-        return DynamicPlant(self.params).saturate(u)
-
-    def logged(self, x, u):
-        return WHEEL_TORQUES.columns(u)
+@pytest.fixture(scope="module", autouse=True)
+def registered():
+    """The example plugin's 7-state plant, registered as its entry point would (one file, one registration)."""
+    wheel_angles.register()
+    yield
+    del registry._PLANTS["wheel_angles"]
 
 
-def scenario():
-    return ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=SHORT)
+def scenario(*overrides):
+    return ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*SHORT, *overrides])
+
+
+SEVEN = "plant.model=wheel_angles"
 
 
 def test_a_seven_state_plant_runs_alone_and_matches_the_five_state_robot():
-    paper = scenario()
+    paper, wheels = scenario(), scenario(SEVEN)
     setup, draws = prepare(paper)
     five = ddtrack.timeseries(run_setup(paper, setup, draws))
-    seven = ddtrack.timeseries(run_setup(paper, dataclasses.replace(setup, plant_model=WheelAnglePlant), draws))
+    seven = ddtrack.timeseries(ddtrack.run(wheels))
     assert set(seven) - set(five) == {"phi_r", "phi_l"}  # its own states, by their names; the rest unchanged
     for name in five:  # the wheel angles feed nothing back, so the robot moves as the 5-state one does
         np.testing.assert_allclose(seven[name], five[name], rtol=1e-12, atol=1e-12, err_msg=name)
@@ -68,10 +58,10 @@ def test_a_seven_state_plant_runs_alone_and_matches_the_five_state_robot():
 
 
 def test_a_seven_state_plant_runs_as_a_batch():
-    paper = scenario()
+    paper, wheels = scenario(), scenario(SEVEN)
     setup, draws = prepare_batch(paper, [0, 1, 2])
-    seven = dataclasses.replace(setup, plant_model=WheelAnglePlant)
-    result = run_setup(paper, seven, draws, batched=True)
+    seven, _ = prepare_batch(wheels, [0, 1, 2])
+    result = run_setup(wheels, seven, draws, batched=True)
     assert result.state.shape[0] == 3 and result.state.shape[-1] == 5  # BODY rows, whatever the plant
     assert set(result.plant_state) == {"phi_r", "phi_l"} and result.plant_state["phi_r"].shape == result.t.shape
     five, seven_rows = batch_metrics(paper, setup, draws), batch_metrics(paper, seven, draws)
@@ -84,7 +74,7 @@ def test_a_seven_state_plant_runs_in_the_environment():
 
     from ddtrack.envs import DiffDriveTrackingEnv
 
-    env = DiffDriveTrackingEnv(scenario(), action_mode="gains", plant_model=WheelAnglePlant)
+    env = DiffDriveTrackingEnv(scenario(SEVEN), action_mode="gains")
     check_env(env, skip_render_check=True)
     reference = DiffDriveTrackingEnv(scenario(), action_mode="gains")
     for e in (env, reference):
@@ -99,12 +89,24 @@ def test_a_seven_state_plant_runs_in_the_environment():
 
 def test_a_controller_the_plant_cannot_take_is_refused_when_assembled():
     setup, _ = prepare(scenario())
-    with pytest.raises(ValueError, match="Backstepping outputs velocity commands but DynamicPlant takes torque"):
+    with pytest.raises(ddtrack.ConfigError, match="Backstepping outputs velocity commands but DynamicPlant takes"):
         dataclasses.replace(setup, controller=ddtrack.controllers.Backstepping())
+    with pytest.raises(ddtrack.ConfigError, match="plant.model: Cascade outputs torque commands but KinematicPlant"):
+        prepare(scenario("plant.model=unicycle"))
+    with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: unknown plant 'wheel_angle'.*'wheel_angles'"):
+        scenario("plant.model=wheel_angle")
     with pytest.raises(ValueError, match="Cascade outputs torque commands but KinematicPlant takes velocity"):
         ddtrack.simulate(
             KinematicPlant(), setup.controller, setup.trajectory, setup.x0, ddtrack.sim.Draws.zeros(5), n_steps=5
         )
+
+
+def test_registration_checks_the_plant():
+    with pytest.raises(TypeError, match="letters, digits"):
+        ddtrack.register_plant("wheel angles", WheelAnglePlant)
+    with pytest.raises(TypeError, match="already registered"):
+        ddtrack.register_plant("dynamic", WheelAnglePlant)
+    assert registry.plant_kind("wheel_angles").summary == "The Lagrangian robot with its wheel angles."
 
 
 def test_layouts_name_their_channels():

@@ -10,6 +10,7 @@ import sys
 import tomllib
 from typing import Literal
 
+import pyarrow.parquet as pq
 import pytest
 import tomli_w
 from conftest import ROOT, SCENARIOS
@@ -114,7 +115,8 @@ def test_a_broken_plugin_is_named_not_a_traceback(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_example_plugin_installs_and_runs_through_mc(tmp_path):
+def test_the_example_plugin_installs_and_runs_through_run_and_mc(tmp_path):
+    """pip-installed, the example plugin's controller and its 7-state plant are known to every command by name."""
     target = tmp_path / "site"
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index"]
@@ -123,16 +125,22 @@ def test_the_example_plugin_installs_and_runs_through_mc(tmp_path):
         timeout=300,
     )
     env = os.environ | {"PYTHONPATH": str(target)}
-    listed = subprocess.run(
-        [sys.executable, "-m", "ddtrack", "list", "controllers"], capture_output=True, text=True, env=env
-    )
-    assert "integral_kanayama" in listed.stdout, listed.stderr
+    listed = subprocess.run([sys.executable, "-m", "ddtrack", "list"], capture_output=True, text=True, env=env)
+    assert "integral_kanayama" in listed.stdout and "wheel_angles" in listed.stdout, listed.stderr
+    scenario = str(_scenario_file(tmp_path, "integral_kanayama"))
+    seven = ["--set", "plant.model=wheel_angles"]
+    run = [sys.executable, "-m", "ddtrack", "run", scenario, *seven, "--set", "simulation.duration=3"]
+    run += ["--set", "simulation.metric_window=[1, 3]", "--out", str(tmp_path / "run")]
+    done = subprocess.run(run, capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    columns = pq.read_table(tmp_path / "run" / "timeseries.parquet").column_names
+    assert {"phi_r", "phi_l"} <= set(columns)  # the plant's own states, recorded by name
     out = tmp_path / "mc"
-    command = [sys.executable, "-m", "ddtrack", "mc", str(_scenario_file(tmp_path, "integral_kanayama")), "-n", "3"]
+    command = [sys.executable, "-m", "ddtrack", "mc", scenario, "-n", "3", *seven]
     command += ["--controllers", "integral_kanayama,backstepping", "--out", str(out)]
     done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     means = json.loads((out / "summary.json").read_text())["controllers"]
     integral, baseline = (means[name]["e_tr_mean"]["mean"] for name in ("integral_kanayama", "backstepping"))
-    assert baseline == pytest.approx(0.046, abs=0.002)  # the paper's line case
+    assert baseline == pytest.approx(0.046, abs=0.002)  # the paper's line case (the wheel angles feed nothing back)
     assert integral < baseline / 5  # the integral removes the friction-induced lag

@@ -47,6 +47,8 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .scenario import Scenario as Scenario
     from .scenario import load_scenario as load_scenario
     from .scenario import register_controller as register_controller
+    from .scenario import register_plant as register_plant
+    from .scenario import register_trajectory as register_trajectory
     from .scenario import validate_scenario as validate_scenario
     from .sim import Draws as Draws
     from .sim import SimResult as SimResult
@@ -68,6 +70,8 @@ _SOURCES = {
     "run_batch": "runner",
     "Scenario": "scenario",
     "register_controller": "scenario",
+    "register_plant": "scenario",
+    "register_trajectory": "scenario",
     "load_scenario": "scenario",
     "validate_scenario": "scenario",
     "Draws": "sim",

@@ -19,7 +19,7 @@ from .._after_import import after_import
 from ..errors import ConfigError, RunError
 from ..precision import enable_float64
 
-LISTS = ("controllers", "trajectories", "disturbances")
+LISTS = ("controllers", "plants", "trajectories", "disturbances")
 
 overwrite_option = click.option(
     "--overwrite",
@@ -155,18 +155,23 @@ def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
     return 0
 
 
-@cli.command(name="list", short_help="List the controllers, trajectories and disturbances.")
+@cli.command(name="list", short_help="List the controllers, plants, trajectories and disturbances.")
 @click.argument("what", required=False, type=click.Choice(LISTS))
 def list_(what: str | None) -> int:
-    """List the controllers, trajectories and disturbances a scenario can name."""
-    from ..scenario import CONTROLLERS, DISTURBANCES, TRAJECTORIES, summary
+    """List the controllers, plants, trajectories and disturbances a scenario can name."""
+    from ..scenario import CONTROLLERS, DISTURBANCES, PLANTS, TRAJECTORIES, summary
 
-    registries = {"controllers": CONTROLLERS, "trajectories": TRAJECTORIES, "disturbances": DISTURBANCES}
-    width = max(len(kind) for registry in registries.values() for kind in registry)
+    lines = {
+        "controllers": {kind: summary(model) for kind, model in CONTROLLERS.items()},
+        "plants": dict(PLANTS),
+        "trajectories": {kind: summary(model) for kind, model in TRAJECTORIES.items()},
+        "disturbances": {kind: summary(model) for kind, model in DISTURBANCES.items()},
+    }
+    width = max(len(kind) for registry in lines.values() for kind in registry)
     for name in [what] if what else LISTS:
         click.echo(f"{name}:")
-        for kind, model in registries[name].items():
-            click.echo(f"  {kind:<{width}}  {summary(model)}")
+        for kind, line in lines[name].items():
+            click.echo(f"  {kind:<{width}}  {line}")
     return 0
 
 

@@ -34,7 +34,6 @@ from .controller_configs import InnerLoopConfig as InnerLoopConfig
 from .controller_configs import NNAdaptiveConfig as NNAdaptiveConfig
 from .controller_configs import PositiveTriple as PositiveTriple
 from .document import DISTURBANCES as DISTURBANCES
-from .document import TRAJECTORIES as TRAJECTORIES
 from .document import Scenario as Scenario
 from .document import summary as summary
 from .files import apply_override as apply_override
@@ -43,13 +42,22 @@ from .files import read_toml as read_toml
 from .files import switch_controller as switch_controller
 from .files import validate_scenario as validate_scenario
 from .registry import CONTROLLERS as CONTROLLERS
+from .registry import PLANTS as PLANTS
+from .registry import TRAJECTORIES as TRAJECTORIES
 from .registry import ControllerConfig as ControllerConfig
 from .registry import ControllerKind as ControllerKind
+from .registry import PlantKind as PlantKind
+from .registry import TrajectoryConfig as TrajectoryConfig
 from .registry import controller_kind as controller_kind
 from .registry import controller_kinds as controller_kinds
 from .registry import kanayama_gains as kanayama_gains
 from .registry import kanayama_kinds as kanayama_kinds
+from .registry import plant_kind as plant_kind
+from .registry import plant_kinds as plant_kinds
 from .registry import register_controller as register_controller
+from .registry import register_plant as register_plant
+from .registry import register_trajectory as register_trajectory
+from .registry import trajectory_kinds as trajectory_kinds
 from .registry import tunable_kinds as tunable_kinds
 from .sections import ConstantDisturbance as ConstantDisturbance
 from .sections import DisturbanceConfig as DisturbanceConfig
@@ -68,13 +76,13 @@ from .trajectory_configs import FigureEightTrajectory as FigureEightTrajectory
 from .trajectory_configs import LineTrajectory as LineTrajectory
 from .trajectory_configs import SinusoidTrajectory as SinusoidTrajectory
 from .trajectory_configs import SquareTrajectory as SquareTrajectory
-from .trajectory_configs import TrajectoryConfig as TrajectoryConfig
 from .trajectory_configs import WaypointsTrajectory as WaypointsTrajectory
 from .trajectory_configs import read_waypoints as read_waypoints
 
 __all__ = [
     "CONTROLLERS",
     "DISTURBANCES",
+    "PLANTS",
     "TRAJECTORIES",
     "Scenario",
     "Setup",
@@ -83,8 +91,11 @@ __all__ = [
     "controller_kind",
     "controller_kinds",
     "load_scenario",
+    "plant_kind",
     "read_waypoints",
     "register_controller",
+    "register_plant",
+    "register_trajectory",
     "summary",
     "to_toml_dict",
     "validate_scenario",

@@ -9,14 +9,13 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from ..controllers import (
-    Controller,
-)
+from ..controllers import Controller
+from ..errors import ConfigError
 from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from ..sim import require_matching_input
 from ..trajectories import Trajectory
 from .document import Scenario
-from .registry import controller_kind
+from .registry import controller_kind, plant_kind
 
 # --- runtime objects -------------------------------------------------------------------------------
 
@@ -38,7 +37,10 @@ class Setup:
 
     def __post_init__(self) -> None:
         if not self.kinematic:  # a wrong pairing is named here, before anything is simulated
-            require_matching_input(self.plant, self.controller)
+            try:
+                require_matching_input(self.plant, self.controller)
+            except ValueError as exc:
+                raise ConfigError("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
 
     @property
     def plant(self) -> Plant:
@@ -76,7 +78,9 @@ def build(
         x0=x0,
         disturbance=scenario.disturbance.build(),
         noise=scenario.noise.build(),
-        kinematic=kind.output == "velocity",
+        # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
+        kinematic=kind.output == "velocity" and scenario.plant.model == "dynamic",
+        plant_model=plant_kind(scenario.plant.model).build,
     )
 
 

@@ -13,7 +13,7 @@ from ._base import (
     _Section,
 )
 from .controller_configs import BacksteppingConfig
-from .registry import ControllerConfig, ControllerField
+from .registry import ControllerConfig, ControllerField, TrajectoryConfig, TrajectoryField
 from .sections import (
     DisturbanceConfig,
     InitialConfig,
@@ -23,9 +23,6 @@ from .sections import (
     RandomizeConfig,
     RobotConfig,
     SimulationConfig,
-)
-from .trajectory_configs import (
-    TrajectoryConfig,
 )
 
 # --- the scenario --------------------------------------------------------------------------------
@@ -56,7 +53,7 @@ class Scenario(_Section):
     randomize: RandomizeConfig = RandomizeConfig()
     disturbance: DisturbanceConfig = NoDisturbance()
     noise: NoiseConfig = NoiseConfig()
-    trajectory: TrajectoryConfig
+    trajectory: Annotated[TrajectoryConfig, TrajectoryField()]
     initial: InitialConfig = InitialConfig()
     controller: Annotated[ControllerConfig, ControllerField()] = BacksteppingConfig(kind="backstepping")
 
@@ -86,7 +83,7 @@ class Scenario(_Section):
 
     def plant_params(self) -> RobotParams:
         """The true plant's nominal values: [plant] over [robot]."""
-        true = self.plant.model_dump(exclude={"floor_friction"})  # the floor is not the robot's
+        true = self.plant.model_dump(exclude={"floor_friction", "model"})  # the floor and model are not parameters
         merged = self.robot.model_dump() | {k: v for k, v in true.items() if v is not None}
         return RobotParams(**merged)
 
@@ -99,7 +96,6 @@ def _registry(union: Any) -> dict[str, type[BaseModel]]:
     return {typing.get_args(m.model_fields["kind"].annotation)[0]: m for m in members}
 
 
-TRAJECTORIES = _registry(TrajectoryConfig)
 DISTURBANCES = _registry(DisturbanceConfig)
 
 

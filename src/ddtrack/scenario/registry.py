@@ -1,18 +1,19 @@
-"""The registry of controller kinds: each ``[controller] kind``'s config class and what it can do.
+"""The registries of the kinds a scenario can name: controllers, plants and trajectories, and what each can do.
 
-One table answers every question that used to be a list or an ``isinstance`` somewhere else: which kinds a
-scenario may name (``ddtrack list``), which have Kanayama gains (the Gymnasium environment's gains mode), which
-``ddtrack tune`` can differentiate, which look ahead along the reference, and which output velocities. The eight
-built-in kinds are registered here through :func:`register_controller`, as a plugin's are; pip-installed plugins
-are found through the ``ddtrack.controllers`` entry-point group the first time the registry is consulted
-(docs/plugins.md).
+One table per kind answers every question that used to be a list or an ``isinstance`` somewhere else: which
+controllers a scenario may name (``ddtrack list``), which have Kanayama gains (the Gymnasium environment's gains
+mode), which ``ddtrack tune`` can differentiate, which look ahead along the reference and what they output; which
+plant ``[plant] model`` names; which ``[trajectory] kind``. The built-in kinds are registered here through
+:func:`register_controller`, :func:`register_plant` and :func:`register_trajectory`, as a plugin's are;
+pip-installed plugins are found through the ``ddtrack.controllers``, ``ddtrack.plants`` and
+``ddtrack.trajectories`` entry-point groups the first time any registry is consulted (docs/plugins.md).
 """
 
 from __future__ import annotations
 
 import json
 import typing
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Annotated, Any, Literal, Protocol, Union
@@ -22,6 +23,8 @@ from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
 
 from ..errors import ConfigError, did_you_mean
+from ..model import DynamicPlant, KinematicPlant, Plant, RobotParams
+from ..trajectories import Trajectory
 from ._base import FieldError
 from .baseline_configs import (
     AdaptiveBacksteppingConfig,
@@ -32,8 +35,32 @@ from .baseline_configs import (
     SlidingModeConfig,
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
+from .trajectory_configs import (
+    CircleTrajectory,
+    FigureEightTrajectory,
+    LineTrajectory,
+    SinusoidTrajectory,
+    SquareTrajectory,
+    WaypointsTrajectory,
+)
 
-ENTRY_POINT_GROUP = "ddtrack.controllers"
+#: the entry-point groups a plugin package registers its kinds through (each entry: a module, or a function
+#: called with no argument, that calls the register functions)
+PLUGIN_GROUPS = ("ddtrack.controllers", "ddtrack.plants", "ddtrack.trajectories")
+ENTRY_POINT_GROUP = PLUGIN_GROUPS[0]
+
+
+class TrajectoryConfig(Protocol):
+    """What the code asks of a ``[trajectory]`` model (a pydantic model, see :func:`register_trajectory`)."""
+
+    @property
+    def kind(self) -> str:
+        """The kind's name, as a scenario file writes it."""
+        ...
+
+    def build(self) -> Trajectory:
+        """The reference trajectory."""
+        ...
 
 
 class ControllerConfig(Protocol):
@@ -69,6 +96,19 @@ class ControllerKind:
 _KINDS: dict[str, ControllerKind] = {}
 _plugins: list[str] = []  # the entry points loaded so far ("name = value"); empty before the first look
 _plugin_error: list[ConfigError] = []  # a broken plugin's error, raised at every look (never half a registry)
+
+
+def _kind_name(config: Any, build: str) -> str:
+    """The one name of a config model's ``kind: Literal["name"]`` field; a TypeError if it is not such a model
+    with a ``build`` method (whose signature ``build`` describes)."""
+    if not (isinstance(config, type) and issubclass(config, BaseModel)) or "kind" not in config.model_fields:
+        raise TypeError(f"{config!r} is not a pydantic model with a kind field")
+    names = typing.get_args(config.model_fields["kind"].annotation)
+    if typing.get_origin(config.model_fields["kind"].annotation) is not Literal or len(names) != 1:
+        raise TypeError(f"{config.__name__}.kind must be Literal['name'] (one name)")
+    if not callable(getattr(config, "build", None)):
+        raise TypeError(f"{config.__name__} has no {build} method")
+    return str(names[0])
 
 
 def register_controller(
@@ -108,14 +148,7 @@ def register_controller(
     TypeError
         if ``config`` is not such a model, or its kind is already registered to another class.
     """
-    if not (isinstance(config, type) and issubclass(config, BaseModel)) or "kind" not in config.model_fields:
-        raise TypeError(f"{config!r} is not a pydantic model with a kind field")
-    names = typing.get_args(config.model_fields["kind"].annotation)
-    if typing.get_origin(config.model_fields["kind"].annotation) is not Literal or len(names) != 1:
-        raise TypeError(f"{config.__name__}.kind must be Literal['name'] (one name)")
-    name = names[0]
-    if not callable(getattr(config, "build", None)):
-        raise TypeError(f"{config.__name__} has no build(nominal, control_period, key) method")
+    name = _kind_name(config, "build(nominal, control_period, key)")
     if has_kanayama_gains and "gains" not in config.model_fields:
         raise TypeError(f"{config.__name__} declares Kanayama gains but has no gains field")
     if output not in ("torque", "velocity"):
@@ -127,28 +160,29 @@ def register_controller(
 
 
 def _load_plugins() -> None:
-    """Import every ``ddtrack.controllers`` entry point once: a module, or a function it calls with no argument."""
+    """Import every entry point of :data:`PLUGIN_GROUPS` once: a module, or a function it calls with no argument."""
     if _plugin_error:
         raise _plugin_error[0]
     if _plugins:
         return
     _plugins.append("")  # marks the look done, so a plugin that registers (and so looks) does not recurse
-    for point in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            loaded = point.load()
-            if callable(loaded) and not isinstance(loaded, type):
-                loaded()
-        except Exception as exc:
-            dist = f" (from {point.dist.name})" if point.dist is not None else ""
-            _plugin_error.append(
-                ConfigError(
-                    f"plugin '{point.name}'{dist}",
-                    f"the {ENTRY_POINT_GROUP} entry point {point.value!r} failed: {type(exc).__name__}: {exc}",
-                    "fix or uninstall that package",
+    for group in PLUGIN_GROUPS:
+        for point in entry_points(group=group):
+            try:
+                loaded = point.load()
+                if callable(loaded) and not isinstance(loaded, type):
+                    loaded()
+            except Exception as exc:
+                dist = f" (from {point.dist.name})" if point.dist is not None else ""
+                _plugin_error.append(
+                    ConfigError(
+                        f"plugin '{point.name}'{dist}",
+                        f"the {group} entry point {point.value!r} failed: {type(exc).__name__}: {exc}",
+                        "fix or uninstall that package",
+                    )
                 )
-            )
-            raise _plugin_error[0] from None
-        _plugins.append(f"{point.name} = {point.value}")
+                raise _plugin_error[0] from None
+            _plugins.append(f"{group}: {point.name} = {point.value}")
 
 
 def controller_kinds() -> dict[str, ControllerKind]:
@@ -165,24 +199,27 @@ def controller_kind(name: str, field: str = "controller.kind") -> ControllerKind
     return kinds[name]
 
 
-class _ConfigClasses(Mapping[str, type[BaseModel]]):
-    """kind -> config class, read live from the registry (a kind registered later shows up)."""
+class _LiveMapping(Mapping[str, Any]):
+    """name -> what ``read`` gives for it, read live from a registry (a kind registered later shows up)."""
 
-    def __getitem__(self, name: str) -> type[BaseModel]:
-        return controller_kinds()[name].config
+    def __init__(self, label: str, kinds: Callable[[], Mapping[str, Any]], read: Callable[[Any], Any]) -> None:
+        self._label, self._kinds, self._read = label, kinds, read
+
+    def __getitem__(self, name: str) -> Any:
+        return self._read(self._kinds()[name])
 
     def __iter__(self) -> Iterator[str]:
-        return iter(controller_kinds())
+        return iter(self._kinds())
 
     def __len__(self) -> int:
-        return len(controller_kinds())
+        return len(self._kinds())
 
     def __repr__(self) -> str:
-        return f"CONTROLLERS({', '.join(self)})"
+        return f"{self._label}({', '.join(self)})"
 
 
 #: kind -> config class of every registered controller (what ``ddtrack list`` shows)
-CONTROLLERS: Mapping[str, type[BaseModel]] = _ConfigClasses()
+CONTROLLERS: Mapping[str, type[BaseModel]] = _LiveMapping("CONTROLLERS", controller_kinds, lambda kind: kind.config)
 
 
 def kanayama_kinds() -> list[str]:
@@ -203,57 +240,169 @@ def kanayama_gains(config: Any) -> tuple[float, float, float]:
     raise ConfigError("controller.kind", f"'{config.kind}' has no Kanayama gains (Kx, Ky, Ktheta)")
 
 
-# --- the [controller] field of a scenario ---------------------------------------------------------
+# --- trajectories ----------------------------------------------------------------------------------
+
+_TRAJECTORIES: dict[str, type[BaseModel]] = {}
 
 
-class InvalidController(ValueError):
-    """The ``[controller]`` table failed its kind's validation; ``errors`` is that validation's error, which
-    the scenario's error translation follows into the kind's model (so messages name ``controller.gains``)."""
+def register_trajectory(config: type[BaseModel]) -> type[BaseModel]:
+    """Make a reference trajectory usable by name as ``[trajectory] kind``.
+
+    ``config`` is the ``[trajectory]`` section's pydantic model: its ``kind: Literal["name"]`` field names the kind
+    and ``build()`` returns the :class:`~ddtrack.trajectories.Trajectory`. Returns ``config`` (a class decorator);
+    a TypeError if it is not such a model or its kind is taken.
+    """
+    name = _kind_name(config, "build()")
+    if name in _TRAJECTORIES and _TRAJECTORIES[name] is not config:
+        raise TypeError(f"trajectory kind {name!r} is already registered ({_TRAJECTORIES[name].__qualname__})")
+    _TRAJECTORIES[name] = config
+    return config
+
+
+def trajectory_kinds() -> dict[str, type[BaseModel]]:
+    """Every registered trajectory kind (plugins included) -> its config class, in registration order."""
+    _load_plugins()
+    return dict(_TRAJECTORIES)
+
+
+#: kind -> config class of every registered trajectory (what ``ddtrack list`` shows)
+TRAJECTORIES: Mapping[str, type[BaseModel]] = _LiveMapping("TRAJECTORIES", trajectory_kinds, lambda config: config)
+
+
+# --- plants ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PlantKind:
+    """A registered plant (see :func:`register_plant`)."""
+
+    name: str
+    build: Callable[[RobotParams], Plant]  #: the true robot's plant from its parameters
+    summary: str
+
+
+_PLANTS: dict[str, PlantKind] = {}
+
+
+def register_plant(name: str, build: Callable[[RobotParams], Plant], *, summary: str = "") -> None:
+    """Make a plant usable by name as ``[plant] model``.
+
+    Parameters
+    ----------
+    name : str
+        The name a scenario gives (letters, digits and ``_``).
+    build : callable
+        ``build(params)`` -> the plant (:class:`~ddtrack.model.Plant`: ``init``/``saturate``/``advance``/
+        ``observe``/``logged`` and its layouts) for the true robot's :class:`~ddtrack.model.RobotParams`; a plant
+        class whose one field is ``params`` is such a callable.
+    summary : str
+        One line for ``ddtrack list plants`` (default: the first line of ``build``'s docstring).
+
+    Raises
+    ------
+    TypeError
+        if ``name`` is not a name, ``build`` is not callable, or the name is taken by another plant.
+    """
+    if not (isinstance(name, str) and name.isidentifier()):
+        raise TypeError(f"a plant's name must be letters, digits and '_', not {name!r}")
+    if not callable(build):
+        raise TypeError(f"{build!r} is not callable: give build(params) -> plant")
+    if name in _PLANTS and _PLANTS[name].build is not build:
+        raise TypeError(f"plant {name!r} is already registered ({_PLANTS[name].build!r})")
+    line = summary or ((build.__doc__ or "").strip().splitlines() or [""])[0]
+    _PLANTS[name] = PlantKind(name, build, line)
+
+
+def plant_kinds() -> dict[str, PlantKind]:
+    """Every registered plant (plugins included), in registration order."""
+    _load_plugins()
+    return dict(_PLANTS)
+
+
+def is_plant(name: str) -> bool:
+    """Whether ``name`` is a registered plant (plugins are looked for only when it is not a built-in one)."""
+    return name in _PLANTS or name in plant_kinds()
+
+
+def plant_kind(name: str, field: str = "plant.model") -> PlantKind:
+    """The registered plant ``name``; a :class:`ConfigError` naming ``field`` with a did-you-mean if there is none."""
+    kinds = plant_kinds()
+    if name not in kinds:
+        raise ConfigError(field, f"unknown plant {name!r}", did_you_mean(str(name), kinds))
+    return kinds[name]
+
+
+#: name -> summary of every registered plant (what ``ddtrack list`` shows)
+PLANTS: Mapping[str, str] = _LiveMapping("PLANTS", plant_kinds, lambda kind: kind.summary)
+
+
+# --- a scenario's kind-selected tables ----------------------------------------------------------
+
+
+class InvalidKind(ValueError):
+    """A ``[controller]`` or ``[trajectory]`` table failed its kind's validation; ``errors`` is that validation's
+    error, which the scenario's error translation follows into the kind's model (so messages name
+    ``controller.gains``)."""
 
     def __init__(self, config: type[BaseModel], errors: ValidationError) -> None:
         super().__init__(str(errors))
         self.config, self.errors = config, errors
 
 
-def _validate_controller(value: Any, info: core_schema.ValidationInfo) -> BaseModel:
-    """Look the table's ``kind`` up in the registry (now, so that a kind registered after import counts) and
-    validate the table with that kind's model, as strictly as the scenario (TOML through JSON: strict)."""
-    if isinstance(value, BaseModel):
-        kind = getattr(value, "kind", None)
-        if isinstance(kind, str) and controller_kind(kind).config is type(value):
-            return value
-        raise PydanticCustomError("model_type", "Input should be a registered controller config or a table")
-    if not isinstance(value, dict):
-        raise PydanticCustomError("model_type", "Input should be an object")
-    kind = value.get("kind")
-    kinds = controller_kinds()
-    if not isinstance(kind, str) or kind not in kinds:
-        raise FieldError("kind", f"unknown kind '{kind}'", did_you_mean(str(kind), kinds))
-    config = kinds[kind].config
-    try:
-        if info.mode == "json":  # the dict came from JSON: validate it as JSON again, keeping strict mode's rules
-            return config.model_validate_json(json.dumps(value), strict=True, context=info.context)
-        return config.model_validate(value, context=info.context)
-    except ValidationError as exc:
-        raise InvalidController(config, exc) from None
+InvalidController = InvalidKind  # the name it had when only controllers were registered
 
 
-class ControllerField:
-    """Marks the scenario's ``controller`` field: validated through the registry; its JSON Schema is the
-    discriminated union (``oneOf`` on ``kind``) of the kinds registered when the schema is made."""
+class KindField:
+    """Marks a scenario field validated through a registry (``kinds``: name -> config class): the table's
+    ``kind`` is looked up when it is validated (so a kind registered after import counts) and the table is
+    validated with that kind's model, as strictly as the scenario. Its JSON Schema is the discriminated union
+    (``oneOf`` on ``kind``) of the kinds registered when the schema is made."""
 
-    @classmethod
-    def __get_pydantic_core_schema__(cls, source: Any, handler: GetCoreSchemaHandler) -> core_schema.CoreSchema:
-        return core_schema.with_info_plain_validator_function(_validate_controller)
+    def __init__(self, kinds: Callable[[], Mapping[str, type[BaseModel]]]) -> None:
+        self.kinds = kinds
 
-    @classmethod
+    def validate(self, value: Any, info: core_schema.ValidationInfo) -> BaseModel:
+        kinds = self.kinds()
+        if isinstance(value, BaseModel):
+            kind = getattr(value, "kind", None)
+            if isinstance(kind, str) and kinds.get(kind) is type(value):
+                return value
+            raise PydanticCustomError("model_type", "Input should be a registered kind's config or a table")
+        if not isinstance(value, dict):
+            raise PydanticCustomError("model_type", "Input should be an object")
+        kind = value.get("kind")
+        if kind is None:
+            raise FieldError("kind", "is missing", 'add kind = "..."; `ddtrack list` shows the kinds')
+        if not isinstance(kind, str) or kind not in kinds:
+            raise FieldError("kind", f"unknown kind '{kind}'", did_you_mean(str(kind), kinds))
+        config = kinds[kind]
+        try:
+            if info.mode == "json":  # the dict came from JSON: validate it as JSON again, keeping strict mode's rules
+                return config.model_validate_json(json.dumps(value), strict=True, context=info.context)
+            return config.model_validate(value, context=info.context)
+        except ValidationError as exc:
+            raise InvalidKind(config, exc) from None
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: GetCoreSchemaHandler) -> core_schema.CoreSchema:
+        return core_schema.with_info_plain_validator_function(self.validate)
+
     def __get_pydantic_json_schema__(
-        cls, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
     ) -> JsonSchemaValue:
-        configs = tuple(kind.config for kind in controller_kinds().values())
+        configs = tuple(self.kinds().values())
         form: Any = Annotated[Union[configs], Field(discriminator="kind")]  # noqa: UP007 (built at run time)
         union: TypeAdapter[Any] = TypeAdapter(form)
         return handler(union.core_schema)
+
+
+def ControllerField() -> KindField:
+    """The scenario's ``controller`` field's marker: validated through the controller registry."""
+    return KindField(lambda: CONTROLLERS)
+
+
+def TrajectoryField() -> KindField:
+    """The scenario's ``trajectory`` field's marker: validated through the trajectory registry."""
+    return KindField(trajectory_kinds)
 
 
 # the built-in kinds, in the order `ddtrack list` and the reference show them
@@ -265,3 +414,18 @@ register_controller(KinematicBacksteppingConfig, has_kanayama_gains=True, output
 register_controller(RegulatedPurePursuitConfig, needs_reference=True)
 register_controller(AdaptiveBacksteppingConfig, has_kanayama_gains=True)
 register_controller(MPPIConfig, needs_reference=True)
+for _trajectory in (
+    LineTrajectory,
+    SquareTrajectory,
+    CircleTrajectory,
+    FigureEightTrajectory,
+    SinusoidTrajectory,
+    WaypointsTrajectory,
+):
+    register_trajectory(_trajectory)
+register_plant("dynamic", DynamicPlant, summary="The Lagrangian robot driven by wheel torques (the default).")
+register_plant(
+    "unicycle",
+    lambda params: KinematicPlant(),
+    summary="The unicycle with ideal velocity tracking, driven by (v, omega) commands.",
+)

@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from ..errors import did_you_mean
 from ..model import MeasurementNoise, RobotParams, WheelDisturbance
 from ._base import (
     MAX_CONTROL_PERIODS,
@@ -101,6 +102,13 @@ class RobotConfig(_Section):
 class PlantConfig(_Section):
     """The true robot; every key left out takes the [robot] value."""
 
+    model: str = Field(
+        "dynamic",
+        description=(
+            "The plant that simulates the true robot, by name (`ddtrack list plants`): 'dynamic' is the "
+            "Lagrangian robot driven by wheel torques."
+        ),
+    )
     mass: Positive | None = Field(None, description="True total mass m [kg].")
     inertia: Positive | None = Field(None, description="True yaw inertia about the centre of mass I_C [kg m^2].")
     com_offset: Annotated[float, Field(ge=-1.0, le=1.0)] | None = Field(
@@ -122,6 +130,14 @@ class PlantConfig(_Section):
             "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor)."
         ),
     )
+
+    @model_validator(mode="after")
+    def _registered_model(self) -> PlantConfig:
+        from .registry import is_plant, plant_kinds  # the registry imports this module's neighbours
+
+        if not is_plant(self.model):
+            raise FieldError("model", f"unknown plant '{self.model}'", did_you_mean(self.model, plant_kinds()))
+        return self
 
 
 class ParameterDraw(_Section):

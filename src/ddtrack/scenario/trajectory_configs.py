@@ -162,17 +162,6 @@ class WaypointsTrajectory(_Section):
         return polyline_path(self.points, speed=self.speed, corner_radius=self.corner_radius, loop=self.loop)
 
 
-TrajectoryConfig = Annotated[
-    LineTrajectory
-    | SquareTrajectory
-    | CircleTrajectory
-    | FigureEightTrajectory
-    | SinusoidTrajectory
-    | WaypointsTrajectory,
-    Field(discriminator="kind"),
-]
-
-
 def _contained(base: Path, name: str) -> Path:
     """``base / name``, refused (ValueError) unless it stays inside ``base``'s folder tree once ``..`` and symlinks
     are resolved: a scenario, perhaps from someone else, can make ddtrack read only files beside it or below it."""
