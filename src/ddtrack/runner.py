@@ -272,7 +272,7 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
-    if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller
+    if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
         return simulate_batch(*runs, **_steps(scenario))
     return simulate_alone(*runs, **_steps(scenario))  # as a batch's row, bit for bit
 

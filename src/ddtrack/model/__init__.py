@@ -18,12 +18,16 @@ from .dynamics import (
     wheel_friction,
     wheel_speeds,
 )
+from .lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant, lag_plant_model
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
 
 __all__ = [
+    "PIONEER_3DX_ALTERNATIVE",
+    "PIONEER_3DX_WITH_LASER",
     "DynamicPlant",
     "KinematicPlant",
+    "LagPlant",
     "MeasurementNoise",
     "ODEPlant",
     "Plant",
@@ -35,6 +39,7 @@ __all__ = [
     "coriolis_vector",
     "energy",
     "input_matrix",
+    "lag_plant_model",
     "mass_matrix",
     "pose_rate",
     "reduced_coriolis",

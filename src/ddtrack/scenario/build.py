@@ -32,21 +32,24 @@ class Setup:
     disturbance: WheelDisturbance
     noise: MeasurementNoise
     identification: Any = None  #: the emulator's identification, for controllers that have one
-    kinematic: bool = False  #: the controller drives the unicycle with ideal velocity tracking
+    kinematic: bool = False  #: the controller outputs velocity commands (v, omega) to a torque-driven robot
     plant_model: Callable[[RobotParams], Plant] = DynamicPlant  #: the true robot's plant from its parameters
 
     def __post_init__(self) -> None:
-        if not self.kinematic:  # a wrong pairing is named here, before anything is simulated
-            try:
-                require_matching_input(self.plant, self.controller)
-            except ValueError as exc:
-                raise ConfigError("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
+        try:  # a wrong pairing is named here, before anything is simulated
+            require_matching_input(self.plant, self.controller)
+        except ValueError as exc:
+            raise ConfigError("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
 
     @property
     def plant(self) -> Plant:
-        """What the run simulates: the true robot (``plant_model(plant_params)``), or for a kinematic controller
-        the unicycle that applies (v, omega) at once (its [plant], [randomize] and [disturbance] have no effect)."""
-        return KinematicPlant() if self.kinematic else self.plant_model(self.plant_params)
+        """What the run simulates: the true robot, ``plant_model(plant_params)``; for a kinematic controller, the
+        true robot if it takes velocity commands (e.g. :class:`~ddtrack.model.LagPlant`), else the unicycle that
+        applies (v, omega) at once (then [plant], [randomize] and [disturbance] have no effect)."""
+        robot = self.plant_model(self.plant_params)
+        if self.kinematic and robot.input_kind != "velocity":
+            return KinematicPlant()
+        return robot
 
 
 def build(
