@@ -317,7 +317,8 @@ def _turtlebot3(
             "max_speed": _SPEC + f" ({spec_speed} m/s); " + motor.source,
             "max_yaw_rate": _SPEC + f" ({spec_yaw_rate} rad/s); " + motor.source,
             "motor": motor.source,
-            "input": _SPEC + " (the OpenCR board runs the DYNAMIXELs in velocity mode from cmd_vel)",
+            "input": "ROBOTIS-GIT/turtlebot3, turtlebot3_node: the base takes cmd_vel (v, omega) commands and runs "
+            "its DYNAMIXELs in velocity mode",
         },
         assumptions={
             "mass": f"derived: sum of the URDF's link masses ({len(links)} links); ROBOTIS gives {spec_mass} kg",
@@ -335,6 +336,7 @@ def _turtlebot3(
             "max_speed": f"derived: the lower of ROBOTIS' limit and no-load speed x R = {top_speed:.4g} m/s",
             "max_yaw_rate": "derived: the lower of ROBOTIS' limit and no-load speed x R / L "
             f"= {top_speed / half_axle:.4g} rad/s",
+            "lag": "none identified; the motor datasheet describes the drive",
             "motor": "no-load current not published (the 52/40 mA standby current is the electronics): taken as 0",
         },
     )
@@ -402,8 +404,8 @@ PIONEER_3DX = RobotPreset(
         "inertia": "assumed: a uniform 455 mm x 381 mm plate, m (a^2 + b^2) / 12; no measured value is published",
         "com_offset": "assumed 0 (not published); the identified lag model absorbs the body's dynamics",
         "wheel_radius": "derived: the 19 cm wheel diameter / 2",
-        "half_axle": "assumed: 0.165 m, the wheel positions of public Webots Pioneer 3-DX models; Adept's "
-        "sheet gives no track",
+        "half_axle": "assumed: 0.165 m, the wheel positions (+-0.165 m) of a public robot definition for the "
+        "Webots Pioneer 3-DX; the specifications quoted give no track",
         "max_torque": "assumed: the grip limit on a floor of friction 1, 1 x m g / 2 x R (motor data are not "
         "published); matters only to a torque-level plant",
         "viscous_friction": "assumed 0: the identified lag model holds the drag",
@@ -445,7 +447,7 @@ PAPER = RobotPreset(
         "mass": _PAPER,
         "inertia": _PAPER + ", read as the yaw inertia about the centre of mass",
         "wheel_radius": _FIERRO,
-        "max_torque": "docs/model.md: the torque saturation |tau| <= 10 N m",
+        "max_torque": "the paper's torque saturation, 10 N m per wheel (docs/model.md, section 2.5)",
     },
     assumptions={
         "com_offset": "chosen: rear drive wheels and front casters put the centre of mass ahead of the axle; "
