@@ -100,7 +100,7 @@ def test_the_burger_yaw_inertia_is_the_parallel_axis_sum_of_its_urdf_links():
 
 def test_the_waffle_pi_inertia_counts_both_casters_off_the_centre_line():
     links = robots.WAFFLE_PI_LINKS
-    mass, xc, inertia = robots.composite_body(links)
+    inertia = robots.composite_body(links)[2]
     on_axis = robots.composite_body(tuple(dataclasses.replace(link, y=0.0) for link in links))[2]
     wheels_and_casters = 2 * 0.02849894 * 0.144**2 + 2 * 0.005 * 0.064**2
     assert inertia - on_axis == pytest.approx(wheels_and_casters, rel=1e-9)
