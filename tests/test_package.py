@@ -22,7 +22,7 @@ LAYERS = [
     {"precision"},
     {"outdir", "feasibility"},
     {"model", "trajectories"},
-    {"controllers"},
+    {"controllers", "robots"},
     {"sim"},
     {"identification"},
     {"scenario", "metrics", "adaptation"},
