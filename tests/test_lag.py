@@ -123,7 +123,7 @@ def test_a_velocity_controller_drives_the_lag_plant_through_run_setup():
     # the ideal unicycle takes each command at once; the lag plant does not
     np.testing.assert_allclose(np.asarray(ideal.state)[1:, 3:], np.asarray(ideal.control)[:-1], atol=1e-12)
     assert np.max(np.abs(state[1:, 3:] - control[:-1])) > 1e-3
-    with pytest.raises(ValueError, match="Cascade outputs torque commands but LagPlant takes velocity"):
+    with pytest.raises(ddtrack.ConfigError, match="Cascade outputs torque commands but LagPlant takes velocity"):
         torque_setup, _ = prepare(ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=SHORT))
         dataclasses.replace(torque_setup, plant_model=lag_plant_model(PIONEER_3DX_WITH_LASER))
 
