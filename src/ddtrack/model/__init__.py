@@ -1,4 +1,4 @@
-"""The robot: parameters, kinematics, Lagrangian dynamics, plants, disturbances and noise (model.md §1)."""
+"""The robot: parameters, kinematics, Lagrangian dynamics, motors, plants, disturbances and noise (model.md §1)."""
 
 from .disturbance import MeasurementNoise, WheelDisturbance
 from .dynamics import (
@@ -18,21 +18,34 @@ from .dynamics import (
     wheel_friction,
     wheel_speeds,
 )
+from .motors import (
+    DCMotor,
+    VelocityDriver,
+    current_envelope,
+    current_rate,
+    torque_driver,
+    torque_envelope,
+    voltage_driver,
+)
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
 
 __all__ = [
+    "DCMotor",
     "DynamicPlant",
     "KinematicPlant",
     "MeasurementNoise",
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "VelocityDriver",
     "WheelDisturbance",
     "body_acceleration",
     "body_velocity",
     "constraint_matrix",
     "coriolis_vector",
+    "current_envelope",
+    "current_rate",
     "energy",
     "input_matrix",
     "mass_matrix",
@@ -41,7 +54,10 @@ __all__ = [
     "reduced_input",
     "reduced_input_inverse",
     "reduced_mass",
+    "torque_driver",
+    "torque_envelope",
     "velocity_basis",
+    "voltage_driver",
     "wheel_friction",
     "wheel_speeds",
 ]
