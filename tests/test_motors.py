@@ -1,7 +1,7 @@
 """Geared DC motors and their drivers (model.md §1.7) against their analytic facts.
 
 The motor of most tests is the Dynamixel XL430-W250 of the TurtleBot3 (ROBOTIS e-Manual): 1.4 N m stall torque at
-11.1 V and 1.3 A, 57 rpm at no load. Its no-load current is not given there; the tests take 0 unless they say.
+11.1 V and 1.3 A, 57 rpm at no load. The tests take its no-load current as 0 (an assumption) unless they say.
 """
 
 from __future__ import annotations
