@@ -1,4 +1,4 @@
-"""The identified velocity-lag plant (model.md §1.6): its step responses in closed form, its coupled steady state,
+"""The identified velocity-lag plant (model.md §1.8): its step responses in closed form, its coupled steady state,
 its speed limits, and a velocity-output controller driving it through ``run_setup``, alone and as a batch."""
 
 from __future__ import annotations

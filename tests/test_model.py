@@ -401,3 +401,106 @@ def test_measurement_noise_adds_scaled_draws():
     np.testing.assert_allclose(got, x + np.asarray(std) * xi, rtol=0, atol=1e-15)  # rounding only
     np.testing.assert_array_equal(got[:, 3], x[:, 3])  # zero std leaves that channel untouched
     np.testing.assert_array_equal(batch(MeasurementNoise().measure, x, xi), x)
+
+
+# --- wheel spin inertia (model.md §1.6) ----------------------------------------------------------
+
+
+def test_wheel_inertia_adds_to_the_mass_and_yaw_inertia_the_torques_see():
+    """From rest, no friction: equal torques tau give v_dot = (2 tau / R) / (m + 2 J_w / R^2), opposite ones
+    omega_dot = (2 L tau / R) / (I_A + 2 J_w L^2 / R^2) (model.md §1.6); a centre-of-mass offset changes nothing
+    at rest, since the Coriolis terms need omega."""
+    tau, zero = 0.7, jnp.zeros(2)
+    for com_offset in (0.0, 0.08):
+        for j_w in (0.0, 0.002, 0.03):
+            p = RobotParams(com_offset=com_offset, wheel_inertia=j_w)
+            r, half = p.wheel_radius, p.half_axle
+            forward = body_acceleration(p, zero, jnp.array([tau, tau]), zero)
+            assert float(forward[0]) == pytest.approx(2 * tau / r / (p.mass + 2 * j_w / r**2), rel=1e-14)
+            assert abs(float(forward[1])) < 1e-14  # rounding only
+            turn = body_acceleration(p, zero, jnp.array([tau, -tau]), zero)
+            expected = 2 * half * tau / r / (p.inertia + p.mass * com_offset**2 + 2 * j_w * half**2 / r**2)
+            assert float(turn[1]) == pytest.approx(expected, rel=1e-14)
+            assert abs(float(turn[0])) < 1e-14
+    # the inertia matters: 0.03 kg m^2 on a 0.05 m wheel is 24 kg more for the torques to push
+    light = body_acceleration(RobotParams(), zero, jnp.array([tau, tau]), zero)
+    heavy = body_acceleration(RobotParams(wheel_inertia=0.03), zero, jnp.array([tau, tau]), zero)
+    assert float(heavy[0]) == pytest.approx(float(light[0]) * 10.0 / 34.0, rel=1e-14)
+
+
+def test_with_wheel_inertia_the_power_of_the_torques_is_the_rate_of_the_energy():
+    """d/dt [1/2 (m v^2 + I_A omega^2) + 1/2 J_w (phi_dot_R^2 + phi_dot_L^2)] = tau . phi_dot without friction
+    or disturbance, in any state: the spin energy is counted once, and the Coriolis terms do no work."""
+    rng = np.random.default_rng(21)
+    p = random_params(rng, N_SAMPLES)
+    j_w = rng.uniform(0.0, 0.05, N_SAMPLES)
+    nu, tau = rng.uniform(-2.0, 2.0, (N_SAMPLES, 2)), rng.uniform(-5.0, 5.0, (N_SAMPLES, 2))
+
+    def power_balance(p, j_w, nu, tau):
+        params = make_params(p, wheel_inertia=j_w)
+        nu_dot = body_acceleration(params, nu, tau, jnp.zeros(2))
+        energy_rate = jax.jvp(lambda n: energy(params, n), (nu,), (nu_dot,))[1]
+        return energy_rate, tau @ wheel_speeds(params, nu)
+
+    energy_rate, power = jax.vmap(power_balance)(p, j_w, nu, tau)
+    np.testing.assert_allclose(energy_rate, power, rtol=1e-11, atol=1e-11)
+    # the spin energy is in energy(): 1/2 J_w |W nu|^2 more than the body's
+    params = RobotParams(com_offset=0.0, wheel_inertia=0.01)
+    nu0 = jnp.array([0.4, 1.5])
+    body = 0.5 * (params.mass * 0.4**2 + params.inertia * 1.5**2)
+    spin = 0.5 * 0.01 * float(jnp.sum(wheel_speeds(params, nu0) ** 2))
+    assert float(energy(params, nu0)) == pytest.approx(body + spin, rel=1e-14)
+
+
+def test_with_wheel_inertia_each_wheel_obeys_its_own_newton_equation():
+    """The floor's force on each wheel, from the body's motion alone (``traction.contact_forces``, which does not
+    know J_w), satisfies J_w phi_ddot_i = tau_i - R F_i: the spinning wheels take their share of the torque and the
+    contact forces the grip check reads stay right (model.md §1.5, 1.6)."""
+    from ddtrack.model.traction import contact_forces
+
+    rng = np.random.default_rng(22)
+    for _ in range(20):
+        params = RobotParams(
+            mass=rng.uniform(1.0, 20.0),
+            inertia=rng.uniform(0.05, 2.0),
+            com_offset=rng.uniform(-0.2, 0.2),
+            wheel_radius=rng.uniform(0.03, 0.15),
+            half_axle=rng.uniform(0.1, 0.4),
+            wheel_inertia=rng.uniform(0.001, 0.05),
+        )
+        nu, tau = jnp.asarray(rng.uniform(-1.0, 1.0, 2)), jnp.asarray(rng.uniform(-2.0, 2.0, 2))
+        nu_dot = np.asarray(body_acceleration(params, nu, tau, jnp.zeros(2)))
+        h = 1e-3  # two samples a step h apart, so the forward difference is nu_dot exactly (up to rounding)
+        right, left, _ = contact_forces(
+            [0.0, h],
+            [float(nu[0]), float(nu[0]) + h * nu_dot[0]],
+            [float(nu[1]), float(nu[1]) + h * nu_dot[1]],
+            mass=params.mass,
+            inertia_axle=params.inertia_axle,
+            com_offset=params.com_offset,
+            half_axle=params.half_axle,
+        )
+        phi_ddot = np.asarray(wheel_speeds(params, jnp.asarray(nu_dot)))
+        forces = np.array([right[0], left[0]])
+        np.testing.assert_allclose(
+            params.wheel_inertia * phi_ddot, np.asarray(tau) - params.wheel_radius * forces, rtol=0, atol=1e-9
+        )
+        assert np.max(np.abs(params.wheel_inertia * phi_ddot)) > 1e-3  # the wheels really took torque
+
+
+def test_computed_torque_uses_the_nominal_wheel_inertia():
+    """Computed torque on a nominal model with the plant's J_w makes nu_dot = u exactly; leaving J_w out of the
+    nominal model on the same plant does not (model.md §1.6, 2.5)."""
+    import dataclasses
+
+    from ddtrack.controllers import ComputedTorque, VelocityCommand
+
+    plant = RobotParams(com_offset=0.08, wheel_inertia=0.01, max_torque=1e9)
+    y = jnp.asarray([0.0, 0.0, 0.3, 0.4, 0.2])
+    command = VelocityCommand(jnp.asarray([0.5, 0.1]), jnp.asarray([0.3, -0.2]), jnp.zeros(2), jnp.asarray(0.0))
+    u = np.asarray(command.nu_c_dot + 10.0 * (command.nu_c - y[3:5]))
+    tau, _, _ = ComputedTorque(plant).torque(y, command, ())
+    np.testing.assert_allclose(body_acceleration(plant, y[3:5], tau, jnp.zeros(2)), u, rtol=0, atol=1e-12)
+    tau, _, _ = ComputedTorque(dataclasses.replace(plant, wheel_inertia=0.0)).torque(y, command, ())
+    slow = np.asarray(body_acceleration(plant, y[3:5], tau, jnp.zeros(2)))
+    assert np.all(np.abs(slow - u) > 0.1 * np.abs(u))  # 8 kg and 0.5 kg m^2 too little: a clear shortfall

@@ -1,4 +1,4 @@
-"""Delays, encoders and odometry (model.md §1.7): exact shifts, the fractional split against the continuously delayed
+"""Delays, encoders and odometry (model.md §1.9): exact shifts, the fractional split against the continuously delayed
 command, quantization bounds, odometry on exact arcs and its drift from wrong nominal wheel radius and track."""
 
 from __future__ import annotations

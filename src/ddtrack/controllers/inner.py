@@ -26,7 +26,8 @@ class ComputedTorque:
     u = nu_c_dot + K_c (nu_c - nu) [+ strict cross term];
     tau = B_bar^-1 (M_hat u + V_hat(nu) nu) + tau_f_hat(W nu) [N m].
     ``nominal`` is what the controller believes (its friction terms are the friction model, 0 by
-    default); ``kc`` = (k_cv, k_cw) [1/s]. With an exact model and no disturbance nu_dot = u (eq. 9).
+    default; its wheel inertia J_w enters M_hat, model.md §1.6); ``kc`` = (k_cv, k_cw) [1/s]. With an exact
+    model and no disturbance nu_dot = u (eq. 9).
     """
 
     nominal: RobotParams

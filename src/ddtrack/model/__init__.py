@@ -1,4 +1,4 @@
-"""The robot: parameters, kinematics, Lagrangian dynamics, plants, disturbances and noise (model.md §1)."""
+"""The robot: parameters, kinematics, Lagrangian dynamics, motors, plants, disturbances and noise (model.md §1)."""
 
 from .disturbance import MeasurementNoise, WheelDisturbance
 from .dynamics import (
@@ -19,12 +19,22 @@ from .dynamics import (
     wheel_speeds,
 )
 from .lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant, lag_plant_model
+from .motors import (
+    DCMotor,
+    VelocityDriver,
+    current_envelope,
+    current_rate,
+    torque_driver,
+    torque_envelope,
+    voltage_driver,
+)
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
 
 __all__ = [
     "PIONEER_3DX_ALTERNATIVE",
     "PIONEER_3DX_WITH_LASER",
+    "DCMotor",
     "DynamicPlant",
     "KinematicPlant",
     "LagPlant",
@@ -32,11 +42,14 @@ __all__ = [
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "VelocityDriver",
     "WheelDisturbance",
     "body_acceleration",
     "body_velocity",
     "constraint_matrix",
     "coriolis_vector",
+    "current_envelope",
+    "current_rate",
     "energy",
     "input_matrix",
     "lag_plant_model",
@@ -46,7 +59,10 @@ __all__ = [
     "reduced_input",
     "reduced_input_inverse",
     "reduced_mass",
+    "torque_driver",
+    "torque_envelope",
     "velocity_basis",
+    "voltage_driver",
     "wheel_friction",
     "wheel_speeds",
 ]

@@ -74,8 +74,10 @@ def input_matrix(params: RobotParams, theta: Array) -> Array:
 
 
 def reduced_mass(params: RobotParams) -> Array:
-    """M_bar = S^T M S = diag(m, I_A)."""
-    return jnp.diag(jnp.stack([jnp.asarray(params.mass, float), jnp.asarray(params.inertia_axle, float)]))
+    """M_bar = diag(m + 2 J_w / R^2, I_A + 2 J_w L^2 / R^2) (model.md §1.6); S^T M S = diag(m, I_A) for J_w = 0."""
+    return jnp.diag(
+        jnp.stack([jnp.asarray(params.effective_mass, float), jnp.asarray(params.effective_inertia_axle, float)])
+    )
 
 
 def reduced_coriolis(params: RobotParams, nu: Array) -> Array:
@@ -104,14 +106,18 @@ def wheel_friction(params: RobotParams, phi_dot: Array) -> Array:
 def body_acceleration(params: RobotParams, nu: Array, tau: Array, tau_dist: Array) -> Array:
     """nu_dot from M_bar nu_dot + V_bar nu + F_bar + tau_bar_d = B_bar tau (model.md §1.3, scalar form).
 
-    ``tau_dist`` are wheel disturbance torques that oppose the drive when positive [N m].
+    ``tau_dist`` are wheel disturbance torques that oppose the drive when positive [N m]. The wheels' spin
+    inertia J_w adds 2 J_w / R^2 to the mass and 2 J_w L^2 / R^2 to the yaw inertia (model.md §1.6).
     """
     net = tau - wheel_friction(params, wheel_speeds(params, nu)) - tau_dist
     drive = reduced_input(params) @ net
     coriolis = reduced_coriolis(params, nu)
-    return jnp.stack([(drive[0] - coriolis[0]) / params.mass, (drive[1] - coriolis[1]) / params.inertia_axle])
+    return jnp.stack(
+        [(drive[0] - coriolis[0]) / params.effective_mass, (drive[1] - coriolis[1]) / params.effective_inertia_axle]
+    )
 
 
 def energy(params: RobotParams, nu: Array) -> Array:
-    """Kinetic energy 1/2 (m v^2 + I_A omega^2) [J]; conserved with no torque, friction or disturbance."""
-    return 0.5 * (params.mass * nu[0] ** 2 + params.inertia_axle * nu[1] ** 2)
+    """Kinetic energy 1/2 (m v^2 + I_A omega^2) + 1/2 J_w (phi_dot_R^2 + phi_dot_L^2) [J], the wheels' spin
+    included (model.md §1.6); conserved with no torque, friction or disturbance."""
+    return 0.5 * (params.effective_mass * nu[0] ** 2 + params.effective_inertia_axle * nu[1] ** 2)

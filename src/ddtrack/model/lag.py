@@ -1,4 +1,4 @@
-"""The identified velocity-lag model of a velocity-commanded base (model.md §1.6).
+"""The identified velocity-lag model of a velocity-commanded base (model.md §1.8).
 
 A commercial base takes a velocity command nu* = (v*, omega*) and its own motor loop tracks it with a lag. Martins
 et al. (2008) and De La Cruz and Carelli (2008) identify that behaviour with six parameters theta_1..theta_6::
@@ -41,7 +41,7 @@ PIONEER_3DX_ALTERNATIVE = (0.5338, 0.2168, -0.0134, 0.9560, -0.0843, 1.0590)
 
 @pytree_dataclass
 class LagPlant(ODEPlant):
-    """A velocity-commanded base with the identified lag dynamics (model.md §1.6); input (v*, omega*).
+    """A velocity-commanded base with the identified lag dynamics (model.md §1.8); input (v*, omega*).
 
     Its state is the :data:`~ddtrack.layout.BODY` vector [x, y, theta, v, omega]; the speeds follow the command
     through the lag, not at once as :class:`~ddtrack.model.KinematicPlant`'s do. Wheel disturbance torques have no

@@ -1,4 +1,4 @@
-"""Latency, wheel encoders and odometry as pure JAX functions (model.md §1.7).
+"""Latency, wheel encoders and odometry as pure JAX functions (model.md §1.9).
 
 Each function has static shapes and no Python branching on traced values, so a ``lax.scan`` body can call it once
 per control period and carry its state:

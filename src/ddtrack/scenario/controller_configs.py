@@ -59,7 +59,10 @@ class _InnerLoopConfig(_Section):
         if self.inner == "computed_torque":
             return self.kc
         r2 = nominal.wheel_radius**2
-        return (2 * self.kp / (nominal.mass * r2), 2 * self.kp * nominal.half_axle**2 / (nominal.inertia_axle * r2))
+        return (
+            2 * self.kp / (nominal.effective_mass * r2),
+            2 * self.kp * nominal.half_axle**2 / (nominal.effective_inertia_axle * r2),
+        )
 
 
 class _KanayamaConfig(_InnerLoopConfig):

@@ -94,6 +94,14 @@ class RobotConfig(_Section):
     viscous_friction: NonNegative = Field(0.0, description="Viscous wheel friction b_w [N m s/rad].")
     coulomb_friction: NonNegative = Field(0.0, description="Coulomb wheel friction tau_c [N m].")
     friction_smoothing: Positive = Field(0.01, description="tanh smoothing wheel speed eps_f [rad/s].")
+    wheel_inertia: NonNegative = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "Spin inertia J_w of each wheel about its axle, wheel plus gear-reflected rotor N^2 J_rotor "
+            "[kg m^2]; 0: massless wheels (model.md §1.6)."
+        ),
+    )
 
     def params(self) -> RobotParams:
         return RobotParams(**self.model_dump())
@@ -122,6 +130,9 @@ class PlantConfig(_Section):
     viscous_friction: NonNegative | None = Field(None, description="True viscous wheel friction b_w [N m s/rad].")
     coulomb_friction: NonNegative | None = Field(None, description="True Coulomb wheel friction tau_c [N m].")
     friction_smoothing: Positive | None = Field(None, description="tanh smoothing wheel speed eps_f [rad/s].")
+    wheel_inertia: Annotated[float, Field(ge=0.0, le=10.0)] | None = Field(
+        None, description="True spin inertia J_w of each wheel, wheel plus N^2 J_rotor [kg m^2]."
+    )
     floor_friction: Positive = Field(
         0.8,
         le=3.0,
