@@ -144,3 +144,39 @@ def test_the_example_plugin_installs_and_runs_through_run_and_mc(tmp_path):
     integral, baseline = (means[name]["e_tr_mean"]["mean"] for name in ("integral_kanayama", "backstepping"))
     assert baseline == pytest.approx(0.046, abs=0.002)  # the paper's line case (the wheel angles feed nothing back)
     assert integral < baseline / 5  # the integral removes the friction-induced lag
+
+
+def test_each_parameter_reaches_its_controller_under_its_own_name():
+    """A config's key and the controller field it sets share one name (``same_named``): given values unlike any
+    default, every controller field named like a key carries that key's value, and no key is silently dropped."""
+    import dataclasses
+
+    from ddtrack.controllers import Backstepping, NNAdaptiveBackstepping
+    from ddtrack.controllers.baselines import LTVUnicycleLQR, RegulatedPurePursuit
+
+    nominal, key = ddtrack.model.RobotParams(), __import__("jax").random.PRNGKey(0)
+    # keys read elsewhere: the inner loop's, the identification run's, and the emulator's shape
+    elsewhere = {"kind", "inner", "kc", "kp", "kd", "identification", "identification_duration", "epochs"}
+    elsewhere |= {"identification_speed", "dither", "emulator", "hidden_units", "gains"}
+    cases = {
+        "backstepping": ({"max_velocity": 1.7, "max_yaw_rate": 3.3, "strict": True}, Backstepping),
+        "nn_adaptive_backstepping": (
+            {"rates": (1.0, 2.0, 3.0), "gradient_clip": 7.5, "leakage": 0.25, "momentum": 0.45, "gate_error": 0.3}
+            | {"max_velocity": 1.7, "learn_saturated": True, "jacobian": "analytic", "freeze_time": 1.5},
+            NNAdaptiveBackstepping,
+        ),
+        "ltv_lqr": ({"min_velocity": 0.01, "dare_iterations": 12, "max_yaw_rate": 3.3}, LTVUnicycleLQR),
+        "regulated_pure_pursuit": ({"pace_gain": 0.7, "search_samples": 17, "max_velocity": 1.1}, RegulatedPurePursuit),
+    }
+    for name, (values, law) in cases.items():
+        config_class = controller_kinds()[name].config
+        config = config_class.model_validate({"kind": name, **values})
+        extra = {"trajectory": ddtrack.trajectories.Line()} if controller_kinds()[name].needs_reference else {}
+        outer = config.build(nominal, 0.01, key, **extra)
+        outer = getattr(outer, "outer", outer)
+        fields = {field.name for field in dataclasses.fields(law)}
+        for key_name, value in values.items():
+            assert key_name in fields, f"{name}: key {key_name} has no controller field of that name"
+            got = getattr(outer, key_name)
+            assert got == value or tuple(got) == value, f"{name}.{key_name}: {got} != {value}"
+        assert set(config_class.model_fields) - fields <= elsewhere | {"kx", "ky", "ktheta"}, name

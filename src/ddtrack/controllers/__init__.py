@@ -1,6 +1,15 @@
 """Controllers: the protocol, inner loops and Kanayama backstepping (model.md §2)."""
 
-from .backstepping import Backstepping, clamp_command, kanayama_command, kanayama_command_rate, lyapunov
+from .backstepping import (
+    KANAYAMA_GAINS,
+    MAX_VELOCITY,
+    MAX_YAW_RATE,
+    Backstepping,
+    clamp_command,
+    kanayama_command,
+    kanayama_command_rate,
+    lyapunov,
+)
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw
 from .dither import Dithered
 from .inner import ComputedTorque, WheelPD
@@ -17,6 +26,9 @@ from .nn_adaptive import (
 )
 
 __all__ = [
+    "KANAYAMA_GAINS",
+    "MAX_VELOCITY",
+    "MAX_YAW_RATE",
     "MLP",
     "AdaptiveMemory",
     "Backstepping",

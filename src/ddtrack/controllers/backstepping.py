@@ -63,6 +63,12 @@ def velocity_command(
     return VelocityCommand(nu_c, nu_c_dot, feedback, saturated)
 
 
+#: Kanayama's gains (Kx [1/s], Ky [1/m^2], Ktheta [1/m]) of the paper's experiments, the default of every law with them
+KANAYAMA_GAINS = (1.0, 55.0, 15.0)
+#: the default clamps on the velocity command, |v_c| [m/s] and |omega_c| [rad/s]
+MAX_VELOCITY, MAX_YAW_RATE = 2.0, 4.0
+
+
 @pytree_dataclass
 class Backstepping:
     """Kanayama backstepping velocity law (paper eq. 12; model.md §2.4, 2.5).
@@ -74,11 +80,11 @@ class Backstepping:
     [e_x, sin(e_th)/Ky] to the inner loop's u (model.md §2.4, not in the paper). Logs the gains.
     """
 
-    kx: Array | float = 1.0
-    ky: Array | float = 55.0
-    ktheta: Array | float = 15.0
-    max_velocity: Array | float = 2.0
-    max_yaw_rate: Array | float = 4.0
+    kx: Array | float = KANAYAMA_GAINS[0]
+    ky: Array | float = KANAYAMA_GAINS[1]
+    ktheta: Array | float = KANAYAMA_GAINS[2]
+    max_velocity: Array | float = MAX_VELOCITY
+    max_yaw_rate: Array | float = MAX_YAW_RATE
     strict: bool = static_field(default=False)
     output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 

@@ -25,7 +25,7 @@ from .._pytree import FloatVector, pytree_dataclass, static_field
 from ..geometry import body_increment, posture_error, rotation
 from ..layout import pose, pose_vector, velocity
 from ..trajectories import Reference
-from .backstepping import kanayama_command, velocity_command
+from .backstepping import MAX_VELOCITY, MAX_YAW_RATE, kanayama_command, velocity_command
 from .base import Logs, VelocityCommand
 from .nn import MLP, Scales, backprop, input_jacobian, momentum_step, sample_loss, zeros_like
 
@@ -159,10 +159,10 @@ class NNAdaptiveBackstepping:
     gamma: FloatVector = (1.0, 50.0, 1.0)  #: Gamma of eq. 22
     learning_rate: float = 0.2  #: emulator eta
     momentum: float = 0.3  #: emulator beta
-    clip_norm: float = 5.0  #: emulator gradient-norm clip
+    gradient_clip: float = 5.0  #: emulator gradient-norm clip
     freeze_time: float = 0.0  #: [s] no gain change before
-    max_velocity: float = 2.0
-    max_yaw_rate: float = 4.0
+    max_velocity: float = MAX_VELOCITY
+    max_yaw_rate: float = MAX_YAW_RATE
     jacobian: str = static_field(default="network")
     error_jacobian: str = static_field(default="exact")
     online_learning: bool = static_field(default=True)
@@ -225,7 +225,7 @@ class NNAdaptiveBackstepping:
                 backprop(mlp, z_prev, target),
                 learning_rate=self.learning_rate,
                 momentum=self.momentum,
-                clip_norm=self.clip_norm,
+                clip_norm=self.gradient_clip,
             )
             keep = lambda new, old: jnp.where(learn, new, old)  # noqa: E731
             mlp, mlp_velocity = (

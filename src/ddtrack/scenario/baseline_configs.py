@@ -28,10 +28,10 @@ from ._base import (
     Positive,
     _Section,
 )
-from .controller_configs import PositiveTriple, _InnerLoopConfig
+from .controller_configs import PositiveTriple, _InnerLoopConfig, _KanayamaGains, _VelocityClamps, same_named
 
 
-class LTVLQRConfig(_InnerLoopConfig):
+class LTVLQRConfig(_VelocityClamps, _InnerLoopConfig):
     """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
 
     kind: Literal["ltv_lqr"]
@@ -53,8 +53,6 @@ class LTVLQRConfig(_InnerLoopConfig):
         le=64,
         description=("Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."),
     )
-    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
     @model_validator(mode="after")
     def _min_velocity_below_clamp(self) -> LTVLQRConfig:
@@ -67,24 +65,15 @@ class LTVLQRConfig(_InnerLoopConfig):
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
-        outer = LTVUnicycleLQR(
-            q_tolerance=self.q_tolerance,
-            r_tolerance=self.r_tolerance,
-            control_period=control_period,
-            min_velocity=self.min_velocity,
-            max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate,
-            dare_iterations=self.dare_iterations,
-        )
+        outer = same_named(self, LTVUnicycleLQR, control_period=control_period)
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
-class SlidingModeConfig(_Section):
+class SlidingModeConfig(_VelocityClamps, _KanayamaGains):
     """Kanayama backstepping over a sliding-mode inner loop with a boundary layer (Slotine and Li 7.1-7.2)."""
 
     kind: Literal["sliding_mode_backstepping"]
-    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11, the linear part [1/s].")
     switching_gain: tuple[NonNegative, NonNegative] = Field(
         (1.0, 2.0),
@@ -99,15 +88,11 @@ class SlidingModeConfig(_Section):
             "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."
         ),
     )
-    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(
-            kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate
-        )
+        outer = same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
         return Cascade(
             outer,
             SlidingModeTorque(
@@ -116,18 +101,15 @@ class SlidingModeConfig(_Section):
         )
 
 
-class KinematicBacksteppingConfig(_Section):
+class KinematicBacksteppingConfig(_VelocityClamps, _KanayamaGains):
     """Kanayama's law on the unicycle with ideal velocity tracking: a reference point (paper eq. 12, model.md §2.4)."""
 
     kind: Literal["kinematic_backstepping"]
-    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
-    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Backstepping:
         """The velocity law alone, which drives the kinematic plant (:attr:`Setup.plant`); ``key`` is unused."""
         kx, ky, ktheta = self.gains
-        return Backstepping(kx=kx, ky=ky, ktheta=ktheta, max_velocity=self.max_velocity, max_yaw_rate=self.max_yaw_rate)
+        return same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
 
 
 class RegulatedPurePursuitConfig(_InnerLoopConfig):
@@ -185,33 +167,15 @@ class RegulatedPurePursuitConfig(_InnerLoopConfig):
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> Cascade:
         """The controller searching ``trajectory`` for its carrot; ``key`` is unused (nothing is drawn)."""
-        outer = RegulatedPurePursuit(
-            trajectory=trajectory,
-            lookahead_time=self.lookahead_time,
-            min_lookahead=self.min_lookahead,
-            max_lookahead=self.max_lookahead,
-            pace_gain=self.pace_gain,
-            min_radius=self.min_radius,
-            min_regulated_speed=self.min_regulated_speed,
-            approach_distance=self.approach_distance,
-            min_approach_speed=self.min_approach_speed,
-            rotate_min_angle=self.rotate_min_angle,
-            rotate_yaw_rate=self.rotate_yaw_rate,
-            max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate,
-            search_horizon=self.search_horizon,
-            search_samples=self.search_samples,
-            rotate_to_heading=self.rotate_to_heading,
-        )
+        outer = same_named(self, RegulatedPurePursuit, trajectory=trajectory)
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
-class AdaptiveBacksteppingConfig(_Section):
+class AdaptiveBacksteppingConfig(_VelocityClamps, _KanayamaGains):
     """Kanayama backstepping over computed torque that estimates m, I_C (and b_w) online (Fukao et al. 2000)."""
 
     kind: Literal["adaptive_backstepping"]
-    gains: PositiveTriple = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta] of the outer law (eq. 12).")
     kc: tuple[Positive, Positive] = Field(
         (10.0, 10.0),
         description=("K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."),
@@ -232,8 +196,6 @@ class AdaptiveBacksteppingConfig(_Section):
             "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."
         ),
     )
-    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
     strict: bool = Field(False, description="Add the strict-backstepping cross term to the torque law.")
 
     @model_validator(mode="after")
@@ -250,14 +212,7 @@ class AdaptiveBacksteppingConfig(_Section):
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(
-            kx=kx,
-            ky=ky,
-            ktheta=ktheta,
-            max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate,
-            strict=self.strict,
-        )
+        outer = same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
         low, high = self.estimate_range
         inner = AdaptiveComputedTorque(
             nominal,
@@ -317,14 +272,4 @@ class MPPIConfig(_Section):
             max_velocity=self.max_velocity,
             max_yaw_rate=self.max_yaw_rate,
         )
-        return MPPI(
-            nominal,
-            trajectory,
-            cost=cost,
-            model_step=self.model_step,
-            control_period=control_period,
-            temperature=self.temperature,
-            noise_std=self.noise_std,
-            samples=self.samples,
-            horizon=self.horizon,
-        )
+        return same_named(self, MPPI, nominal=nominal, trajectory=trajectory, cost=cost, control_period=control_period)

@@ -73,6 +73,12 @@ def build(
         controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
     else:
         controller = config.build(nominal, sim.control_period, key)
+    built_output = getattr(controller, "output_kind", kind.output)
+    if built_output != kind.output:  # the registration and the class must agree on what the plant receives
+        raise TypeError(
+            f"controller kind {kind.name!r} is registered with output={kind.output!r}, but builds a "
+            f"{type(controller).__name__} whose output_kind is {built_output!r}"
+        )
     return Setup(
         nominal=nominal,
         plant_params=plant_params if plant_params is not None else scenario.plant_params(),

@@ -4,14 +4,18 @@ and the paper's NN-adaptive backstepping.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import jax
 import jax.numpy as jnp
 from pydantic import Field, model_validator
 
 from ..controllers import (
+    KANAYAMA_GAINS,
+    MAX_VELOCITY,
+    MAX_YAW_RATE,
     Backstepping,
     Cascade,
     ComputedTorque,
@@ -35,14 +39,43 @@ from ._base import (
 # --- [controller] -------------------------------------------------------------------------------
 
 
-class _InnerLoopConfig(_Section):
+class _ControllerSection(_Section):
+    """The root of every built-in ``[controller]`` model: its parts below are each declared once, and a kind
+    combines the parts it has (listed in the order its keys should appear after ``kind``)."""
+
+    kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
+
+
+class _KanayamaGains(_ControllerSection):
+    """Kanayama's gains (paper eq. 12)."""
+
+    gains: tuple[Positive, Positive, Positive] = Field(
+        KANAYAMA_GAINS, description="[Kx [1/s], Ky [1/m^2], Ktheta [1/m]] of Kanayama's law (paper eq. 12)."
+    )
+
+
+class _VelocityClamps(_ControllerSection):
+    """The clamps on the velocity command (v_c, omega_c)."""
+
+    max_velocity: Positive = Field(MAX_VELOCITY, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(MAX_YAW_RATE, description="Clamp on |omega_c| [rad/s].")
+
+
+def same_named(config: _Section, cls: Any, **derived: Any) -> Any:
+    """``cls`` (a controller dataclass) built from ``config``'s keys of the same names, and ``derived`` for the rest:
+    each parameter is declared once, in the config, and cannot drift on its way to the controller (a renamed key
+    is a missing argument, not a silent default)."""
+    names = {field.name for field in dataclasses.fields(cls)} & set(type(config).model_fields)
+    return cls(**{name: getattr(config, name) for name in names - set(derived)}, **derived)
+
+
+class _InnerLoopConfig(_ControllerSection):
     """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md).
 
     The inner loop is computed torque (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level
     controller meets the same dynamics layer.
     """
 
-    kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
     inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
     kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
@@ -65,12 +98,10 @@ class _InnerLoopConfig(_Section):
         )
 
 
-class _KanayamaConfig(_InnerLoopConfig):
-    """The keys of Kanayama's law (paper eq. 12), shared by backstepping and its NN-adaptive form."""
+class _KanayamaConfig(_VelocityClamps, _KanayamaGains, _InnerLoopConfig):
+    """The keys of Kanayama's law (paper eq. 12) over the inner loop, shared by backstepping and its NN-adaptive
+    form."""
 
-    gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
-    max_velocity: Positive = Field(2.0, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c| [rad/s].")
     strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
 
     @model_validator(mode="after")
@@ -88,14 +119,7 @@ class BacksteppingConfig(_KanayamaConfig):
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
         kx, ky, ktheta = self.gains
-        outer = Backstepping(
-            kx=kx,
-            ky=ky,
-            ktheta=ktheta,
-            max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate,
-            strict=self.strict,
-        )
+        outer = same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
         return Cascade(outer, self.build_inner(nominal, control_period))
 
 
@@ -213,31 +237,13 @@ class NNAdaptiveConfig(_KanayamaConfig):
         )
         bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
         freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
-        outer = NNAdaptiveBackstepping(
-            gains=self.gains,
+        outer = same_named(
+            self,
+            NNAdaptiveBackstepping,
             emulator=emulator,
             control_period=control_period,
             analytic_coefficients=one_step_coefficient(bandwidth, control_period),
-            rates=self.rates,
-            gain_momentum=self.gain_momentum,
-            max_step=self.max_step,
-            gain_min=self.gain_min,
-            gain_max=self.gain_max,
-            gate_error=self.gate_error,
-            leakage=self.leakage,
-            gamma=self.gamma,
-            learning_rate=self.learning_rate,
-            momentum=self.momentum,
-            clip_norm=self.gradient_clip,
             freeze_time=freeze,
-            max_velocity=self.max_velocity,
-            max_yaw_rate=self.max_yaw_rate,
-            jacobian=self.jacobian,
-            error_jacobian=self.error_jacobian,
-            online_learning=self.online_learning,
-            learn_saturated=self.learn_saturated,
-            structured_jacobian=self.structured_jacobian,
-            strict=self.strict,
             nominal_period=self._nominal_period(nominal, control_period),
         )
         return Cascade(outer, self.build_inner(nominal, control_period))

@@ -34,7 +34,7 @@ from ..._pytree import FloatVector, pytree_dataclass, static_field
 from ...geometry import error_rates, posture_error
 from ...layout import pose, velocity
 from ...trajectories import Reference
-from ..backstepping import clamp_command
+from ..backstepping import MAX_VELOCITY, MAX_YAW_RATE, clamp_command
 from ..base import Logs, VelocityCommand
 
 
@@ -94,8 +94,8 @@ class LTVUnicycleLQR:
     r_tolerance: FloatVector = (1.0, 2.0)
     control_period: float = 0.01
     min_velocity: float = 1e-4
-    max_velocity: float = 2.0
-    max_yaw_rate: float = 4.0
+    max_velocity: float = MAX_VELOCITY
+    max_yaw_rate: float = MAX_YAW_RATE
     dare_iterations: int = static_field(default=32)
     output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
