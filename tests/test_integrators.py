@@ -245,3 +245,25 @@ def test_plant_integration_through_wheel_reversals_converges_to_scipy():
     assert errors[0] / errors[1] > 4.0 and errors[1] / errors[2] > 4.0, errors
     # and it is small in absolute terms: O(h tau_c / (R m)) ~ 1e-4 per reversal, amplified over 3 s
     assert errors[0] < 1e-2 and errors[2] < 1e-5, errors
+
+
+def test_semi_implicit_euler_is_first_order_and_keeps_an_undamped_oscillator_bounded():
+    """x'' = -x from (1, 0): semi-implicit Euler's error halves with the step (first order), and over 100 periods
+    its energy stays within O(h) of 1/2 where explicit Euler's grows as (1 + h^2)^n."""
+    from ddtrack.integrators import semi_implicit_euler_step
+
+    def run(h, n):
+        q, v = jnp.array([1.0]), jnp.array([0.0])
+        for _ in range(n):
+            q, v = semi_implicit_euler_step(lambda q, v: -q, lambda q, v, h: h * v, q, v, h)
+        return float(q[0]), float(v[0])
+
+    errors = [abs(run(h, round(1.0 / h))[0] - np.cos(1.0)) for h in (0.02, 0.01)]
+    assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.05)
+    h = 0.1
+    q, v = jnp.array([1.0]), jnp.array([0.0])
+    energy = []
+    for _ in range(round(200 * np.pi / h)):
+        q, v = semi_implicit_euler_step(lambda q, v: -q, lambda q, v, h: h * v, q, v, h)
+        energy.append(0.5 * float(q[0] ** 2 + v[0] ** 2))
+    assert max(abs(e - 0.5) for e in energy) < h  # explicit Euler: 0.5 (1 + h^2)^6283, about 1e27

@@ -40,7 +40,9 @@ from jax import Array
 from ..._ordered import total
 from ..._pytree import FloatVector, pytree_dataclass, static_field
 from ...geometry import wrap_angle
-from ...model import RobotParams, body_acceleration
+from ...integrators import semi_implicit_euler_step
+from ...layout import pose_vector, velocity
+from ...model import RobotParams, body_acceleration, pose_rate
 from ...trajectories import Reference, Trajectory
 from ..base import Logs
 
@@ -62,10 +64,14 @@ def rollout(nominal: RobotParams, state: Array, sequence: Array, dt: float) -> A
     """(H, 5) states after each held torque of ``sequence`` (H, 2), semi-implicit Euler on the nominal model."""
 
     def advance(x, tau):
-        nu = x[3:5] + dt * body_acceleration(nominal, x[3:5], tau, jnp.zeros(2))
-        theta = x[2] + dt * nu[1]
-        # semi-implicit Euler: the heading moves with the updated yaw rate, the position with the updated speed
-        pose = jnp.stack([x[0] + dt * nu[0] * jnp.cos(x[2]), x[1] + dt * nu[0] * jnp.sin(x[2]), theta])
+        # the heading moves with the updated yaw rate, the position with the updated speed and the old heading
+        pose, nu = semi_implicit_euler_step(
+            lambda q, nu: body_acceleration(nominal, nu, tau, jnp.zeros(2)),
+            lambda q, nu, h: pose_rate(q[2], h * nu[0], h * nu[1]),
+            pose_vector(x),
+            velocity(x),
+            dt,
+        )
         x = jnp.concatenate([pose, nu])
         return x, x
 
