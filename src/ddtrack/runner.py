@@ -24,6 +24,7 @@ from ._format import significant
 from .adaptation import adaptation_warnings
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
+from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance, traction
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
@@ -84,12 +85,12 @@ def _seed_draws(seed: int, n_steps: int) -> tuple[dict, tuple, Array, Array]:
     """Every key and standard-normal draw of one run as one program: drawn one by one, each is a dispatch of
     its own, and together they cost an interactive run more than the simulation (same bits either way)."""
     keys = streams(seed)
-    disturbance = jax.random.normal(keys["disturbance"], (n_steps, 2))
+    disturbance = jax.random.normal(keys["disturbance"], (n_steps, len(WHEEL_TORQUES)))
     return (
         keys,
         tuple(jax.random.split(keys["controller"], 3)),
         disturbance,
-        jax.random.normal(keys["noise"], (n_steps, 5)),
+        jax.random.normal(keys["noise"], (n_steps, len(BODY))),  # on what every plant reports
     )
 
 

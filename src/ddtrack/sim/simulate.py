@@ -11,7 +11,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
 from ..geometry import posture_error
-from ..layout import BODY, pose, velocity
+from ..layout import BODY, WHEEL_TORQUES, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..precision import require_float64
 from ..trajectories import Trajectory
@@ -26,9 +26,11 @@ class Draws(NamedTuple):
     Attributes
     ----------
     disturbance
-        (N, 2) standard-normal draws for the Gaussian wheel-torque disturbance, one per period
+        (N, 2) standard-normal draws for the Gaussian wheel-torque disturbance, one per period (its channels are
+        :data:`~ddtrack.layout.WHEEL_TORQUES`, whatever the plant)
     noise
-        (N, 5) standard-normal draws for the measurement noise, one per period
+        (N, 5) standard-normal draws for the measurement noise, one per period, on what every plant reports
+        (:data:`~ddtrack.layout.BODY`), so a plant with more states draws the same numbers
     controller_key
         the PRNG key handed to ``controller.init`` (e.g. an MPPI sampler, dither)
     """
@@ -40,7 +42,7 @@ class Draws(NamedTuple):
     @staticmethod
     def zeros(n_steps: int) -> Draws:
         """No randomness: for deterministic studies and tests."""
-        return Draws(jnp.zeros((n_steps, 2)), jnp.zeros((n_steps, 5)), jax.random.PRNGKey(0))
+        return Draws(jnp.zeros((n_steps, len(WHEEL_TORQUES))), jnp.zeros((n_steps, len(BODY))), jax.random.PRNGKey(0))
 
 
 DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] beyond which a run has diverged, unless a caller says otherwise
