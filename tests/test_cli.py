@@ -190,7 +190,7 @@ def test_validate_and_list(cli):
 
 def test_usage_errors_exit_2(cli):
     assert cli("frobnicate")[0] == 2
-    assert cli("list", "robots")[0] == 2
+    assert cli("list", "robot")[0] == 2
     assert cli("run")[0] == 2
     assert cli("run", SCENARIOS / "paper_line.toml", "--seed", "-1")[0] == 2
 

@@ -4,7 +4,8 @@
 for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a robot clamped at 0.22 m/s ran "ok" with
 1.89 m of error), an angle beyond 2 pi (``heading = 45`` is almost surely degrees; it ran as a 58.3 deg line), and
 masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams). It returns
-warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp.
+warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp or beyond the top speed or yaw rate
+of the ``robot.preset``.
 """
 
 from __future__ import annotations
@@ -108,6 +109,29 @@ def check_clamps(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
     return warnings
 
 
+def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
+    """Warn where the reference exceeds the top speed or yaw rate of the ``robot.preset`` (the simulated plant may
+    follow it, the real robot could not). Nothing is changed: the controller's clamps stay as the file sets them."""
+    if scenario.robot.preset is None:
+        return []
+    from .robots import PRESETS
+
+    robot, warnings = PRESETS[scenario.robot.preset], []
+    for what, unit, top, peak in (
+        ("speed", "m/s", robot.max_speed, peaks[0]),
+        ("yaw rate", "rad/s", robot.max_yaw_rate, peaks[1]),
+    ):
+        if top is not None and peak > top:
+            warnings.append(
+                {
+                    "code": "reference_beyond_robot",
+                    "message": f"the reference's {what} reaches {peak:.3g} {unit}, above the top {what} of a "
+                    f"{robot.name} (robot.preset), {top:.3g} {unit}: the real robot could not follow it",
+                }
+            )
+    return warnings
+
+
 def check_angles(scenario: Any) -> None:
     """Refuse an angle beyond 2 pi, naming it in degrees and radians."""
     angles = []
@@ -144,4 +168,5 @@ def check(scenario: Any) -> list[dict]:
     """Run every check on a validated scenario; return the warnings (raise :class:`ConfigError` on a refusal)."""
     check_angles(scenario)
     check_units(scenario)
-    return check_clamps(scenario, reference_peaks(scenario))
+    peaks = reference_peaks(scenario)
+    return [*check_clamps(scenario, peaks), *check_robot_limits(scenario, peaks)]

@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import click
 
@@ -19,7 +20,10 @@ from .._after_import import after_import
 from ..errors import ConfigError, RunError
 from ..precision import enable_float64
 
-LISTS = ("controllers", "plants", "trajectories", "disturbances")
+if TYPE_CHECKING:
+    from ..robots import RobotPreset
+
+LISTS = ("controllers", "plants", "trajectories", "disturbances", "robots")
 
 overwrite_option = click.option(
     "--overwrite",
@@ -155,10 +159,12 @@ def validate(scenario: Path, overrides: tuple[str, ...]) -> int:
     return 0
 
 
-@cli.command(name="list", short_help="List the controllers, plants, trajectories and disturbances.")
+@cli.command(name="list", short_help="List the controllers, plants, trajectories, disturbances and robot presets.")
 @click.argument("what", required=False, type=click.Choice(LISTS))
 def list_(what: str | None) -> int:
-    """List the controllers, plants, trajectories and disturbances a scenario can name."""
+    """List the controllers, plants, trajectories, disturbances and robot presets (robot.preset) a scenario can
+    name."""
+    from ..robots import PRESETS
     from ..scenario import CONTROLLERS, DISTURBANCES, PLANTS, TRAJECTORIES, summary
 
     lines = {
@@ -166,6 +172,7 @@ def list_(what: str | None) -> int:
         "plants": dict(PLANTS),
         "trajectories": {kind: summary(model) for kind, model in TRAJECTORIES.items()},
         "disturbances": {kind: summary(model) for kind, model in DISTURBANCES.items()},
+        "robots": {name: robot_line(robot) for name, robot in PRESETS.items()},
     }
     width = max(len(kind) for registry in lines.values() for kind in registry)
     for name in [what] if what else LISTS:
@@ -173,6 +180,13 @@ def list_(what: str | None) -> int:
         for kind, line in lines[name].items():
             click.echo(f"  {kind:<{width}}  {line}")
     return 0
+
+
+def robot_line(robot: RobotPreset) -> str:
+    """A preset's line in ``ddtrack list robots``: its description and, where published, its top speeds."""
+    if robot.max_speed is None or robot.max_yaw_rate is None:
+        return f"{robot.description}; no top speed"
+    return f"{robot.description}; top speed {robot.max_speed:.3g} m/s, {robot.max_yaw_rate:.3g} rad/s"
 
 
 @cli.command(short_help="Animate a run folder: the robot following its reference.")

@@ -4,11 +4,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, model_validator
 
-from ..errors import did_you_mean
+from ..errors import ConfigError, did_you_mean
 from ..model import MeasurementNoise, RobotParams, WheelDisturbance
 from ._base import (
     MAX_CONTROL_PERIODS,
@@ -83,6 +83,13 @@ class SimulationConfig(_Section):
 class RobotConfig(_Section):
     """The nominal model: what the controller believes."""
 
+    preset: str | None = Field(
+        None,
+        description=(
+            "A real robot by name (`ddtrack list robots`, docs/robots.md): every key of this section the robot has "
+            "takes its published value; a key given here as well wins."
+        ),
+    )
     mass: Positive = Field(10.0, description="Total mass m [kg].")
     inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
     com_offset: float = Field(
@@ -103,8 +110,24 @@ class RobotConfig(_Section):
         ),
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_from_preset(cls, data: Any) -> Any:
+        """The preset's values under the keys the file gives (so the resolved scenario holds the numbers and reads
+        back the same)."""
+        if not isinstance(data, dict) or "preset" not in data or not isinstance(data["preset"], str):
+            return data  # no preset, or not a string: the field's own check names it
+        from ..robots import preset
+
+        try:
+            robot = preset(data["preset"])
+        except ConfigError as exc:
+            raise FieldError("preset", exc.message, exc.suggestion) from None
+        values = {**robot.params, "wheel_inertia": robot.wheel_inertia}
+        return {**{k: v for k, v in values.items() if k in cls.model_fields}, **data}
+
     def params(self) -> RobotParams:
-        return RobotParams(**self.model_dump())
+        return RobotParams(**self.model_dump(exclude={"preset"}))
 
 
 class PlantConfig(_Section):
