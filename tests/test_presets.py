@@ -8,12 +8,14 @@ import tomllib
 import pytest
 import tomli_w
 from conftest import SCENARIOS
+from test_schema import schema_errors
 
 import ddtrack
 from ddtrack import robots
 from ddtrack.errors import ConfigError
 from ddtrack.feasibility import check
 from ddtrack.scenario import to_toml_dict, validate_scenario
+from ddtrack.schema import scenario_schema
 
 MINIMAL = {"name": "p", "trajectory": {"kind": "line", "speed": 0.1}, "controller": {"max_velocity": 0.22}}
 
@@ -46,6 +48,7 @@ def test_the_resolved_scenario_reads_back_the_same(robot, tmp_path):
     resolved = to_toml_dict(scenario)
     assert resolved["robot"]["preset"] == robot["preset"]  # where the numbers came from
     assert resolved["robot"]["mass"] == robots.preset(robot["preset"]).params["mass"]  # and the numbers
+    assert schema_errors(scenario_schema(), scenario_schema(), resolved) == []
     path = tmp_path / "scenario.toml"
     path.write_text(tomli_w.dumps(resolved))  # as `ddtrack run` writes it
     assert ddtrack.load_scenario(path) == scenario
