@@ -21,11 +21,12 @@ from ddtrack.model import (
     TorqueDrivenPlant,
     VelocityDrivenPlant,
     VelocityDriver,
+    motor_from_datasheet,
     torque_driven_model,
     torque_envelope,
     velocity_driven_model,
 )
-from ddtrack.robots import motor_from_datasheet, preset
+from ddtrack.robots import preset
 from ddtrack.runner import prepare, prepare_batch, run_setup
 
 PERIOD, SUBSTEPS = 0.01, 20

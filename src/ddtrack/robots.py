@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Literal
 from .errors import ConfigError, did_you_mean
 
 if TYPE_CHECKING:
-    from .model.motors import DCMotor
     from .model.params import RobotParams
 
 GRAVITY = 9.80665  #: standard gravity [m/s^2], the value ``ddtrack.model.traction`` uses
@@ -69,47 +68,6 @@ class MotorDatasheet:
     gear_ratio: float
     encoder_counts: int
     source: str
-
-
-def motor_from_datasheet(
-    sheet: MotorDatasheet,
-    efficiency: float = 1.0,
-    current_limit: float | None = None,
-    supply_voltage: float | None = None,
-) -> DCMotor:
-    """The :class:`ddtrack.model.DCMotor` of a datasheet (docs/model.md, geared DC motors), referred to the wheel.
-
-    The datasheet's figures are at the output shaft, so the motor's constants are the wheel's; the gear ratio is
-    already folded in.
-
-    Parameters
-    ----------
-    sheet : MotorDatasheet
-        The motor's datasheet, e.g. ``preset("turtlebot3_burger").motor``.
-    efficiency : float, optional
-        Gearbox efficiency in (0, 1]; it only splits eta k_t (the stall torque is measured through the gearbox).
-    current_limit : float, optional
-        The driver's current limit [A]; default the stall current at the supply voltage.
-    supply_voltage : float, optional
-        The driver's supply [V]; default the datasheet's voltage.
-
-    Returns
-    -------
-    DCMotor
-        R_a = V / I_s, eta k_t = tau_s / I_s, k_e = (V - R_a I_0) / omega_0.
-    """
-    from .model.motors import DCMotor
-
-    return DCMotor.from_datasheet(
-        sheet.voltage,
-        sheet.stall_torque,
-        sheet.stall_current,
-        sheet.no_load_speed,
-        no_load_current=sheet.no_load_current,
-        efficiency=efficiency,
-        current_limit=current_limit,
-        supply_voltage=supply_voltage,
-    )
 
 
 @dataclass(frozen=True)

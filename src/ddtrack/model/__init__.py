@@ -19,7 +19,13 @@ from .dynamics import (
     wheel_speeds,
 )
 from .lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant, lag_plant_model
-from .motor_plants import TorqueDrivenPlant, VelocityDrivenPlant, torque_driven_model, velocity_driven_model
+from .motor_plants import (
+    TorqueDrivenPlant,
+    VelocityDrivenPlant,
+    motor_from_datasheet,
+    torque_driven_model,
+    velocity_driven_model,
+)
 from .motors import (
     DCMotor,
     VelocityDriver,
@@ -57,6 +63,7 @@ __all__ = [
     "input_matrix",
     "lag_plant_model",
     "mass_matrix",
+    "motor_from_datasheet",
     "pose_rate",
     "reduced_coriolis",
     "reduced_input",

@@ -15,13 +15,14 @@ what a controller's command means:
 Both are advanced by RK4 like ``DynamicPlant`` (the driver evaluated continuously, inside every RK4 stage) and log
 the torques the motors applied and the currents they drew, not the commands: the torques are what effort and the
 grip a run needed are computed from. :func:`torque_driven_model` and :func:`velocity_driven_model` give the
-``Setup.plant_model`` of either for a drawn robot, alone or as a batch.
+``Setup.plant_model`` of either for a drawn robot, alone or as a batch; :func:`motor_from_datasheet` the motor of a
+preset's datasheet (``ddtrack.robots``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar, TypeVar
+from typing import ClassVar, Protocol, TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -187,3 +188,70 @@ def velocity_driven_model(driver: VelocityDriver) -> Callable[[RobotParams], Vel
         return VelocityDrivenPlant(params, _like_batch(driver, params))
 
     return plant_model
+
+
+class MotorSheet(Protocol):
+    """What :func:`motor_from_datasheet` reads of a datasheet (``ddtrack.robots.MotorDatasheet`` has it), all at
+    the output shaft: voltage [V], stall torque [N m], stall current [A], no-load speed [rad/s] and current [A]."""
+
+    @property
+    def voltage(self) -> float:
+        """The voltage the figures hold at [V]."""
+        ...
+
+    @property
+    def stall_torque(self) -> float:
+        """Output torque at stall [N m]."""
+        ...
+
+    @property
+    def stall_current(self) -> float:
+        """Current at stall [A]."""
+        ...
+
+    @property
+    def no_load_speed(self) -> float:
+        """Output speed with no load [rad/s]."""
+        ...
+
+    @property
+    def no_load_current(self) -> float:
+        """Current with no load [A]."""
+        ...
+
+
+def motor_from_datasheet(
+    sheet: MotorSheet,
+    efficiency: float = 1.0,
+    current_limit: float | None = None,
+    supply_voltage: float | None = None,
+) -> DCMotor:
+    """The :class:`~ddtrack.model.motors.DCMotor` of a datasheet, e.g. ``preset("turtlebot3_burger").motor``
+    (model.md §1.7).
+
+    Parameters
+    ----------
+    sheet : MotorSheet
+        The datasheet's figures at the output shaft, so the motor's constants are the wheel's (gear ratio included).
+    efficiency : float, optional
+        Gearbox efficiency in (0, 1]; it only splits eta k_t (the stall torque is measured through the gearbox).
+    current_limit : float, optional
+        The driver's current limit [A]; default the stall current at the supply voltage.
+    supply_voltage : float, optional
+        The driver's supply [V]; default the datasheet's voltage.
+
+    Returns
+    -------
+    DCMotor
+        R_a = V / I_s, eta k_t = tau_s / I_s, k_e = (V - R_a I_0) / omega_0 (:meth:`DCMotor.from_datasheet`).
+    """
+    return DCMotor.from_datasheet(
+        sheet.voltage,
+        sheet.stall_torque,
+        sheet.stall_current,
+        sheet.no_load_speed,
+        no_load_current=sheet.no_load_current,
+        efficiency=efficiency,
+        current_limit=current_limit,
+        supply_voltage=supply_voltage,
+    )
