@@ -199,7 +199,7 @@ def test_a_straight_step_is_the_linear_pi_loop_in_closed_form():
     voltage = driver.kp * (target - states[:, 3] / radius) + driver.ki * states[:, 5]
     assert np.max(voltage) < motor.supply_voltage  # never clipped: the linear analysis holds
     assert abs(states[-1, 3] - command) < 1e-9 and np.max(np.abs(states[:, [1, 2, 4]])) < 1e-15
-    # the torque logged is a (u - k_e phi_dot) eta k_t... i.e. J phi_ddot: positive while it speeds up
+    # at rest the logged torque is a (u - k_e phi_dot) with u = kp phi_dot*: the P term alone
     assert logged["tau_r"][0] == pytest.approx(a * driver.kp * target, rel=1e-12)
     # without the integral the loop settles short, at kp / (kp + k_e) of the set-point
     _, p_only, _ = respond(VelocityDrivenPlant(params, burger_driver(ki=0.0)), (command, 0.0), 200)
