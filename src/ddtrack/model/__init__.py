@@ -19,6 +19,13 @@ from .dynamics import (
     wheel_speeds,
 )
 from .lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant, lag_plant_model
+from .motor_plants import (
+    TorqueDrivenPlant,
+    VelocityDrivenPlant,
+    motor_from_datasheet,
+    torque_driven_model,
+    velocity_driven_model,
+)
 from .motors import (
     DCMotor,
     VelocityDriver,
@@ -42,6 +49,8 @@ __all__ = [
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "TorqueDrivenPlant",
+    "VelocityDrivenPlant",
     "VelocityDriver",
     "WheelDisturbance",
     "body_acceleration",
@@ -54,14 +63,17 @@ __all__ = [
     "input_matrix",
     "lag_plant_model",
     "mass_matrix",
+    "motor_from_datasheet",
     "pose_rate",
     "reduced_coriolis",
     "reduced_input",
     "reduced_input_inverse",
     "reduced_mass",
+    "torque_driven_model",
     "torque_driver",
     "torque_envelope",
     "velocity_basis",
+    "velocity_driven_model",
     "voltage_driver",
     "wheel_friction",
     "wheel_speeds",

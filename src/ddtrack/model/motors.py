@@ -17,9 +17,10 @@ Three drivers decide what a controller commands:
 * :func:`voltage_driver`: PWM; the voltage command is clipped to +-V_s and the current to +-i_max;
 * :class:`VelocityDriver`: a PI loop on the wheel speed that sets the voltage, with anti-windup.
 
-Everything here is a pure JAX function of pytrees, so it runs under ``jit``, ``vmap`` and ``grad``; the plants do
-not use it yet. The gearbox efficiency multiplies the torque in both directions of power flow (a back-driven
-gearbox would divide instead): a simplification that matters only while a wheel brakes.
+Everything here is a pure JAX function of pytrees, so it runs under ``jit``, ``vmap`` and ``grad``; the plants of
+:mod:`ddtrack.model.motor_plants` put it behind the wheels. The gearbox efficiency multiplies the torque in both
+directions of power flow (a back-driven gearbox would divide instead): a simplification that matters only while a
+wheel brakes.
 """
 
 from __future__ import annotations
