@@ -248,9 +248,21 @@ _TRAJECTORIES: dict[str, type[BaseModel]] = {}
 def register_trajectory(config: type[BaseModel]) -> type[BaseModel]:
     """Make a reference trajectory usable by name as ``[trajectory] kind``.
 
-    ``config`` is the ``[trajectory]`` section's pydantic model: its ``kind: Literal["name"]`` field names the kind
-    and ``build()`` returns the :class:`~ddtrack.trajectories.Trajectory`. Returns ``config`` (a class decorator);
-    a TypeError if it is not such a model or its kind is taken.
+    Parameters
+    ----------
+    config : type
+        The ``[trajectory]`` section's pydantic model: its ``kind: Literal["name"]`` field names the kind and
+        ``build()`` returns the :class:`~ddtrack.trajectories.Trajectory`.
+
+    Returns
+    -------
+    type
+        ``config``, so that the call can decorate the class.
+
+    Raises
+    ------
+    TypeError
+        if ``config`` is not such a model, or its kind is already registered to another class.
     """
     name = _kind_name(config, "build()")
     if name in _TRAJECTORIES and _TRAJECTORIES[name] is not config:
