@@ -16,7 +16,6 @@ import ddtrack
 from ddtrack.controllers import Backstepping, Cascade, VelocityCommand
 from ddtrack.controllers.baselines import MPPI, AdaptiveComputedTorque, regressor
 from ddtrack.model import RobotParams, reduced_input, reduced_mass, wheel_friction
-from ddtrack.runner import row, run_batch
 from ddtrack.scenario import AdaptiveBacksteppingConfig, MPPIConfig, build
 
 KINDS = ("adaptive_backstepping", "mppi")
@@ -198,14 +197,3 @@ def test_selectable_by_name():
             controller="adaptive_backstepping",
             overrides=["controller.estimate_range=[1.2, 2.0]"],
         )
-
-
-@pytest.mark.parametrize("kind", KINDS)
-def test_a_batch_row_is_the_single_run(kind):
-    scenario, single = _circle_run(kind)
-    batch = row(run_batch(scenario, [0, 1]), 0)
-    for name in ("state", "control", "error"):
-        np.testing.assert_allclose(getattr(batch, name), getattr(single, name), rtol=0, atol=1e-12)
-    assert batch.logs.keys() == single.logs.keys()
-    for name in single.logs:  # mppi_cost is ~1e3: a few of its ulps
-        np.testing.assert_allclose(batch.logs[name], single.logs[name], rtol=1e-14, atol=1e-12)

@@ -14,7 +14,6 @@ import ddtrack
 from ddtrack.controllers import Backstepping, Cascade, ComputedTorque, VelocityCommand
 from ddtrack.controllers.baselines import LTVUnicycleLQR, SlidingModeTorque, switching_term, unicycle_error_model
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance, pose_rate, reduced_input, reduced_mass
-from ddtrack.runner import row, run_batch
 from ddtrack.sim import Draws, simulate, stack
 from ddtrack.trajectories import Circle, Line
 
@@ -225,18 +224,3 @@ def test_tracks_the_paper_line_and_a_circle(kind):
         result = ddtrack.run(scenario)
         assert result.status_name == "ok"
         assert _mean_error(result, scenario) < 1.5 * measured  # far below backstepping's 0.046 m
-
-
-@pytest.mark.parametrize("kind", KINDS)
-def test_a_batch_row_is_the_single_run(kind):
-    # the circle, not paper_line: 7 m off the line the analytic nu_c_dot feeds omega back with gain
-    # v_r Ky e_x ~ 200 1/s, and with the switching term's K_s / phi the sampled loop is briefly unstable
-    # (bounded by sat), which grows the ulp differences between vmapped and single code to ~1e-12
-    scenario = _scenario("circle.toml", kind, 10)
-    single = ddtrack.run(scenario, seed=1)
-    batch = row(run_batch(scenario, [0, 1]), 1)
-    for name in ("state", "control", "error"):
-        np.testing.assert_allclose(getattr(batch, name), getattr(single, name), rtol=0, atol=1e-12)
-    assert batch.logs.keys() == single.logs.keys()
-    for name in single.logs:
-        np.testing.assert_allclose(batch.logs[name], single.logs[name], rtol=0, atol=1e-12)

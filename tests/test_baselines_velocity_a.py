@@ -252,10 +252,6 @@ def test_regulated_pure_pursuit_tracks_the_circle():
     assert found["e_tr_mean"] < 0.07  # over [20, 60] s measured 0.057 m (backstepping 0.046 m)
 
 
-def test_regulated_pure_pursuit_batch_rows_equal_single_runs():
-    assert_batch_rows_equal_single_runs("regulated_pure_pursuit")
-
-
 # --- switching the controller kind -----------------------------------------------------------------
 
 

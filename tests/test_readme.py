@@ -3,6 +3,7 @@ output is run, in order, in a scratch folder, and its output compared line by li
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 import subprocess
@@ -54,3 +55,22 @@ def test_the_readme_tour_prints_what_the_readme_shows(tmp_path):
         )
         for want, got in zip(expected, actual, strict=True):
             assert matches(want, got), f"{command}: README shows\n{want}\nit printed\n{got}"
+    check_reproduce_folder(tmp_path / "runs" / "reproduce")
+
+
+def check_reproduce_folder(out: Path) -> None:
+    """What the tour's ``ddtrack reproduce`` wrote besides its table: the paired improvements, the CSV, the figures."""
+    table = json.loads((out / "table1.json").read_text())
+    assert table["seeds"] == 5 and set(table["cases"]) == {"paper_line", "paper_square"}
+    for entry in table["cases"].values():
+        bs, nn = entry["controllers"]["backstepping"], entry["controllers"]["nn_adaptive"]
+        assert len(nn["e_tr_mean"]["values"]) == 5 and nn["e_tr_mean"]["ci_low"] <= nn["e_tr_mean"]["mean"]
+        # the paired improvement is computed from the per-seed values
+        paired = [100 * (b - n) / b for b, n in zip(bs["e_tr_mean"]["values"], nn["e_tr_mean"]["values"], strict=True)]
+        assert entry["improvement"]["nn_adaptive"]["values"] == pytest.approx(paired)
+        assert entry["paper"]["backstepping"] in (0.0547, 0.0976)
+    rows = (out / "table1.csv").read_text().splitlines()
+    assert rows[0] == "case,controller,statistic,mean,ci_low,ci_high,n,paper" and len(rows) == 1 + 2 * (4 + 4 + 1)
+    figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert len(figures) == 8 and "paper_line_gains.png" in figures and "paper_square_path.png" in figures
+    assert (out / "table1.md").read_text().startswith("# Table 1, reproduced (5 seeds")
