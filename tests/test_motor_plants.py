@@ -276,3 +276,33 @@ def test_a_batch_row_is_the_single_run():
     single = run_setup(scenario, dataclasses.replace(single_setup, plant_model=model), single_draws)
     np.testing.assert_allclose(np.asarray(batch.state)[1], np.asarray(single.state), rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(batch.logs["tau_r"])[1], np.asarray(single.logs["tau_r"]), atol=1e-12)
+
+
+def test_a_scenario_names_the_motor_plants_and_gets_its_presets_motor():
+    """``[plant] model = "motor_velocity"`` with ``[robot] preset``: the preset's motors under the PI loop of
+    ``[plant] velocity_pi``, by name, for a velocity-output controller (as over cmd_vel); without a motor, refused."""
+    burger = [*SHORT, 'robot.preset="turtlebot3_burger"']
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "burger_20hz.toml",
+        overrides=[*burger, "plant.model=motor_velocity", "plant.velocity_pi=[3, 40]"],
+        controller="kinematic_backstepping",
+    )
+    setup, draws = prepare(scenario)
+    plant = setup.plant
+    assert isinstance(plant, VelocityDrivenPlant) and (float(plant.driver.kp), float(plant.driver.ki)) == (3.0, 40.0)
+    expected = motor_from_datasheet(preset("turtlebot3_burger").motor)
+    assert float(plant.driver.motor.back_emf) == pytest.approx(float(expected.back_emf), rel=1e-15)
+    columns = ddtrack.timeseries(run_setup(scenario, setup, draws))
+    assert {"i_r", "i_l", "pi_r", "pi_l"} <= set(columns)  # the plant's own states and logs, by name
+    # every applied torque within the motor's torque-speed curve at the wheel's recorded speed
+    wheel = (columns["v"] + float(setup.plant_params.half_axle) * columns["omega"]) / float(
+        setup.plant_params.wheel_radius
+    )
+    low, high = torque_envelope(expected, wheel)
+    assert np.all(columns["tau_r"][:-1] <= np.asarray(high)[:-1] + 1e-9)
+    assert np.all(columns["tau_r"][:-1] >= np.asarray(low)[:-1] - 1e-9)
+    torque = ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=[*burger, "plant.model=motor_torque"])
+    assert isinstance(prepare(torque)[0].plant, TorqueDrivenPlant)
+    no_motor = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*SHORT, "plant.model=motor_torque"])
+    with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: 'motor_torque' needs the robot's motor.*burger"):
+        prepare(no_motor)

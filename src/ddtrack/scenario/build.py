@@ -89,7 +89,7 @@ def build(
         noise=scenario.noise.build(),
         # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
         kinematic=kind.output == "velocity" and scenario.plant.model == "dynamic",
-        plant_model=plant_kind(scenario.plant.model).build,
+        plant_model=plant_kind(scenario.plant.model).model(scenario),
     )
 
 

@@ -35,6 +35,7 @@ from .baseline_configs import (
     SlidingModeConfig,
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
+from .motor_configs import motor_torque_plant, motor_velocity_plant
 from .trajectory_configs import (
     CircleTrajectory,
     FigureEightTrajectory,
@@ -289,14 +290,22 @@ class PlantKind:
     """A registered plant (see :func:`register_plant`)."""
 
     name: str
-    build: Callable[[RobotParams], Plant]  #: the true robot's plant from its parameters
+    build: Callable[..., Plant]  #: the true robot's plant from its parameters (and the scenario, if it reads it)
     summary: str
+    reads_scenario: bool = False  #: ``build(params, scenario)``: it takes more than the parameters from the scenario
+
+    def model(self, scenario: Any) -> Callable[[RobotParams], Plant]:
+        """``Setup.plant_model`` for ``scenario``: the plant of a drawn robot's parameters."""
+        if not self.reads_scenario:
+            return self.build
+        build = self.build
+        return lambda params: build(params, scenario)
 
 
 _PLANTS: dict[str, PlantKind] = {}
 
 
-def register_plant(name: str, build: Callable[[RobotParams], Plant], *, summary: str = "") -> None:
+def register_plant(name: str, build: Callable[..., Plant], *, summary: str = "", reads_scenario: bool = False) -> None:
     """Make a plant usable by name as ``[plant] model``.
 
     Parameters
@@ -309,6 +318,10 @@ def register_plant(name: str, build: Callable[[RobotParams], Plant], *, summary:
         class whose one field is ``params`` is such a callable.
     summary : str
         One line for ``ddtrack list plants`` (default: the first line of ``build``'s docstring).
+    reads_scenario : bool
+        ``build(params, scenario)`` takes the validated scenario too, for what its plant reads beyond the robot's
+        parameters (a motor from ``[robot] preset``, a driver's gains from ``[plant]``); it raises
+        :class:`~ddtrack.errors.ConfigError` naming the field when the scenario lacks it.
 
     Raises
     ------
@@ -322,7 +335,7 @@ def register_plant(name: str, build: Callable[[RobotParams], Plant], *, summary:
     if name in _PLANTS and _PLANTS[name].build is not build:
         raise TypeError(f"plant {name!r} is already registered ({_PLANTS[name].build!r})")
     line = summary or ((build.__doc__ or "").strip().splitlines() or [""])[0]
-    _PLANTS[name] = PlantKind(name, build, line)
+    _PLANTS[name] = PlantKind(name, build, line, reads_scenario)
 
 
 def plant_kinds() -> dict[str, PlantKind]:
@@ -436,6 +449,18 @@ for _trajectory in (
 ):
     register_trajectory(_trajectory)
 register_plant("dynamic", DynamicPlant, summary="The Lagrangian robot driven by wheel torques (the default).")
+register_plant(
+    "motor_torque",
+    motor_torque_plant,
+    summary="The robot's geared DC motors under current control: torque commands within the torque-speed curve.",
+    reads_scenario=True,
+)
+register_plant(
+    "motor_velocity",
+    motor_velocity_plant,
+    summary="The robot's motors under a PI wheel-speed loop: (v, omega) commands, as ROS bases take cmd_vel.",
+    reads_scenario=True,
+)
 register_plant(
     "unicycle",
     lambda params: KinematicPlant(),

@@ -156,6 +156,13 @@ class PlantConfig(_Section):
     wheel_inertia: Annotated[float, Field(ge=0.0, le=10.0)] | None = Field(
         None, description="True spin inertia J_w of each wheel, wheel plus N^2 J_rotor [kg m^2]."
     )
+    velocity_pi: tuple[NonNegative, NonNegative] = Field(
+        (2.0, 50.0),
+        description=(
+            "[kp [V s/rad], ki [V/rad]] of the wheel-speed PI loop of model 'motor_velocity'; an assumed tuning: "
+            "on a TurtleBot3 Burger driving straight its poles are real, -14 and -176 1/s. Tune it to your board."
+        ),
+    )
     floor_friction: Positive = Field(
         0.8,
         le=3.0,

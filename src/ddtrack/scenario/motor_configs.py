@@ -1,0 +1,38 @@
+"""The plants driven by a robot's motors, built from a scenario: the motor of ``[robot] preset``'s datasheet, the
+velocity loop's gains from ``[plant] velocity_pi`` (registered as ``motor_torque`` and ``motor_velocity``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..errors import ConfigError
+from ..model import DCMotor, RobotParams, TorqueDrivenPlant, VelocityDrivenPlant, VelocityDriver
+from ..model.motor_plants import motor_from_datasheet, torque_driven_model, velocity_driven_model
+
+
+def scenario_motor(scenario: Any) -> DCMotor:
+    """The motor of the scenario's ``[robot] preset``; a ConfigError naming ``plant.model`` if it has none."""
+    from ..robots import PRESETS
+
+    with_motor = sorted(name for name, robot in PRESETS.items() if robot.motor is not None)
+    name = scenario.robot.preset
+    robot = PRESETS.get(name) if name is not None else None
+    if robot is None or robot.motor is None:
+        raise ConfigError(
+            "plant.model",
+            f"'{scenario.plant.model}' needs the robot's motor, and "
+            + (f"preset '{name}' has none" if name is not None else "[robot] names no preset"),
+            "set robot.preset to a robot with motors: " + ", ".join(with_motor),
+        )
+    return motor_from_datasheet(robot.motor)
+
+
+def motor_torque_plant(params: RobotParams, scenario: Any) -> TorqueDrivenPlant:
+    """The drawn robot with its preset's motors under current control (model.md §1.7)."""
+    return torque_driven_model(scenario_motor(scenario))(params)
+
+
+def motor_velocity_plant(params: RobotParams, scenario: Any) -> VelocityDrivenPlant:
+    """The drawn robot with its preset's motors under a PI wheel-speed loop (model.md §1.7)."""
+    kp, ki = scenario.plant.velocity_pi
+    return velocity_driven_model(VelocityDriver(scenario_motor(scenario), kp, ki))(params)
