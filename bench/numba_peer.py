@@ -530,7 +530,7 @@ def batch_arrays(scenario, setup, draws) -> dict:
             (A_LEAK, "leakage"),
             (A_LR, "learning_rate"),
             (A_MOMENTUM, "momentum"),
-            (A_CLIP, "clip_norm"),
+            (A_CLIP, "gradient_clip"),
             (A_FREEZE, "freeze_time"),
         ]:
             adaptive[:, column] = per_robot(getattr(outer, name), n, 1)

@@ -610,7 +610,7 @@ def params_from_nn_setup(scenario: Any, setup: Any) -> dict[str, Any]:
         gamma=floats(law.gamma),
         learning_rate=float(law.learning_rate),
         momentum=float(law.momentum),
-        clip_norm=float(law.clip_norm),
+        clip_norm=float(law.gradient_clip),
         freeze_time=float(law.freeze_time),
         input_scales=floats(law.emulator.scales.inputs),
         output_scales=floats(law.emulator.scales.outputs),

@@ -112,11 +112,10 @@ def check_clamps(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
 def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
     """Warn where the reference exceeds the top speed or yaw rate of the ``robot.preset`` (the simulated plant may
     follow it, the real robot could not). Nothing is changed: the controller's clamps stay as the file sets them."""
-    if scenario.robot.preset is None:
+    robot = scenario.robot.preset_robot()  # the scenario layer reads the presets (they sit above this module)
+    if robot is None:
         return []
-    from .robots import PRESETS
-
-    robot, warnings = PRESETS[scenario.robot.preset], []
+    warnings = []
     for what, unit, top, peak in (
         ("speed", "m/s", robot.max_speed, peaks[0]),
         ("yaw rate", "rad/s", robot.max_yaw_rate, peaks[1]),

@@ -129,6 +129,12 @@ class RobotConfig(_Section):
     def params(self) -> RobotParams:
         return RobotParams(**self.model_dump(exclude={"preset"}))
 
+    def preset_robot(self) -> Any:
+        """The :class:`~ddtrack.robots.RobotPreset` that ``preset`` names, or None."""
+        from ..robots import preset
+
+        return None if self.preset is None else preset(self.preset)
+
 
 class PlantConfig(_Section):
     """The true robot; every key left out takes the [robot] value."""
