@@ -137,3 +137,32 @@ def test_the_lag_plant_runs_as_a_batch_row_for_row():
     single = run_setup(scenario, dataclasses.replace(single_setup, plant_model=model), single_draws)
     np.testing.assert_allclose(np.asarray(batch.state)[1], np.asarray(single.state), rtol=0, atol=1e-12)
     assert np.max(np.asarray(batch.control)[..., 0]) <= 0.6
+
+
+def test_a_scenario_names_the_lag_plant_of_its_preset():
+    """``[plant] model = "lag"`` with ``[robot] preset = "pioneer_3dx"``: the preset's identified theta, limited to its
+    top speed and yaw rate; a preset without an identified model is refused, naming the ones that have one."""
+    from ddtrack.robots import preset
+
+    pioneer = [*SHORT, 'robot.preset="pioneer_3dx"', "plant.model=lag"]
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "paper_line.toml", controller="kinematic_backstepping", overrides=pioneer
+    )
+    setup, draws = prepare(scenario)
+    robot = preset("pioneer_3dx")
+    assert isinstance(setup.plant, LagPlant)
+    np.testing.assert_array_equal(np.asarray(setup.plant.theta), np.asarray(robot.lag))
+    assert float(setup.plant.max_speed) == robot.max_speed and float(setup.plant.max_yaw_rate) == robot.max_yaw_rate
+    result = run_setup(scenario, setup, draws)
+    assert result.status_name == "ok"
+    # the command is limited to the top speed; the speed settles at command / theta_4 (its DC gain), not above
+    assert float(np.max(np.abs(result.control[:, 0]))) <= robot.max_speed + 1e-12
+    assert float(np.max(np.abs(result.state[:, 3]))) <= robot.max_speed / robot.lag[3] + 1e-9
+    burger = [*SHORT, 'robot.preset="turtlebot3_burger"', "plant.model=lag"]
+    unidentified = ddtrack.load_scenario(
+        SCENARIOS / "paper_line.toml", controller="kinematic_backstepping", overrides=burger
+    )
+    with pytest.raises(
+        ddtrack.ConfigError, match="(?s)plant.model: 'lag' needs .*preset 'turtlebot3_burger' has none.*pioneer_3dx"
+    ):
+        prepare(unidentified)

@@ -1,12 +1,21 @@
-"""The plants driven by a robot's motors, built from a scenario: the motor of ``[robot] preset``'s datasheet, the
-velocity loop's gains from ``[plant] velocity_pi`` (registered as ``motor_torque`` and ``motor_velocity``)."""
+"""The plants built from what a scenario's ``[robot] preset`` knows beyond the robot's parameters: the motors of
+its datasheet (``motor_torque``, ``motor_velocity`` with ``[plant] velocity_pi``'s gains) and its identified
+velocity-lag model (``lag``)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from ..errors import ConfigError
-from ..model import DCMotor, RobotParams, TorqueDrivenPlant, VelocityDrivenPlant, VelocityDriver
+from ..model import (
+    DCMotor,
+    LagPlant,
+    RobotParams,
+    TorqueDrivenPlant,
+    VelocityDrivenPlant,
+    VelocityDriver,
+    lag_plant_model,
+)
 from ..model.motor_plants import motor_from_datasheet, torque_driven_model, velocity_driven_model
 
 
@@ -36,3 +45,22 @@ def motor_velocity_plant(params: RobotParams, scenario: Any) -> VelocityDrivenPl
     """The drawn robot with its preset's motors under a PI wheel-speed loop (model.md §1.7)."""
     kp, ki = scenario.plant.velocity_pi
     return velocity_driven_model(VelocityDriver(scenario_motor(scenario), kp, ki))(params)
+
+
+def lag_plant(params: RobotParams, scenario: Any) -> LagPlant:
+    """The identified velocity-lag model of the scenario's ``[robot] preset`` (model.md §1.8), limited to the
+    preset's top speed and yaw rate; the robot's own parameters do not enter it."""
+    from ..robots import PRESETS
+
+    name = scenario.robot.preset
+    robot = PRESETS.get(name) if name is not None else None
+    if robot is None or robot.lag is None:
+        identified = sorted(key for key, value in PRESETS.items() if value.lag is not None)
+        raise ConfigError(
+            "plant.model",
+            "'lag' needs the robot's identified velocity-lag model, and "
+            + (f"preset '{name}' has none" if name is not None else "[robot] names no preset"),
+            "set robot.preset to an identified robot: " + ", ".join(identified),
+        )
+    top = (robot.max_speed, robot.max_yaw_rate)
+    return lag_plant_model(robot.lag, *(limit if limit is not None else float("inf") for limit in top))(params)

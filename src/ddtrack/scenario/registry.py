@@ -35,7 +35,7 @@ from .baseline_configs import (
     SlidingModeConfig,
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
-from .motor_configs import motor_torque_plant, motor_velocity_plant
+from .motor_configs import lag_plant, motor_torque_plant, motor_velocity_plant
 from .trajectory_configs import (
     CircleTrajectory,
     FigureEightTrajectory,
@@ -459,6 +459,12 @@ register_plant(
     "motor_velocity",
     motor_velocity_plant,
     summary="The robot's motors under a PI wheel-speed loop: (v, omega) commands, as ROS bases take cmd_vel.",
+    reads_scenario=True,
+)
+register_plant(
+    "lag",
+    lag_plant,
+    summary="A velocity-commanded base's identified first-order lags (Martins et al.), from [robot] preset.",
     reads_scenario=True,
 )
 register_plant(
