@@ -208,7 +208,7 @@ def markdown_table(preset: RobotPreset) -> str:
 # ---------------------------------------------------------------------------------------------------------------
 # Sources
 
-_SPEC = "ROBOTIS e-Manual, TurtleBot3 specifications (https://emanual.robotis.com/docs/en/platform/turtlebot3/specifications/)"
+_TURTLEBOT3_PAGE = "ROBOTIS e-Manual, TurtleBot3 specifications (https://emanual.robotis.com/docs/en/platform/turtlebot3/specifications/)"
 _DXL = "ROBOTIS e-Manual, TurtleBot3 appendix DYNAMIXEL (https://emanual.robotis.com/docs/en/platform/turtlebot3/appendix_dynamixel/)"
 _URDF = "ROBOTIS-GIT/turtlebot3, turtlebot3_description/urdf/{}.urdf (https://github.com/ROBOTIS-GIT/turtlebot3)"
 _PARAM = "ROBOTIS-GIT/turtlebot3, turtlebot3_bringup/param/{}.yaml (wheels.separation, wheels.radius)"
@@ -314,8 +314,8 @@ def _turtlebot3(
             "max_torque": motor.source,
             "wheel_inertia": _URDF.format(urdf) + " (wheel izz); " + _BAM,
             "caster_position": _URDF.format(urdf),
-            "max_speed": _SPEC + f" ({spec_speed} m/s); " + motor.source,
-            "max_yaw_rate": _SPEC + f" ({spec_yaw_rate} rad/s); " + motor.source,
+            "max_speed": _TURTLEBOT3_PAGE + f" ({spec_speed} m/s); " + motor.source,
+            "max_yaw_rate": _TURTLEBOT3_PAGE + f" ({spec_yaw_rate} rad/s); " + motor.source,
             "motor": motor.source,
             "input": "ROBOTIS-GIT/turtlebot3, turtlebot3_node: the base takes cmd_vel (v, omega) commands and runs "
             "its DYNAMIXELs in velocity mode",
