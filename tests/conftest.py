@@ -14,6 +14,12 @@ import ddtrack
 from ddtrack.cli import main
 
 ddtrack.enable_float64()  # as a script must, before any test builds an array
+# The persistent compilation cache stays off in the test processes (see below), yet JAX 0.10 still hashes every
+# program into a cache key and takes its cache-writing path unless the cache is disabled outright: do that, so the
+# thousands of in-process compilations take the plain path (a pytest worker once segfaulted inside that path)
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_compilation_cache", False)
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
