@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 
@@ -48,6 +49,40 @@ def no_persistent_cache_in_this_process():
         for module in (ddtrack.cli, ddtrack.cli.studies):
             patch.setattr(module, "enable_compilation_cache", lambda: None)
         yield
+
+
+def memory_mappings() -> int:
+    """How many memory mappings this process holds (Linux; 0 elsewhere)."""
+    try:
+        with open("/proc/self/maps", "rb") as maps:
+            return sum(1 for _ in maps)
+    except OSError:
+        return 0
+
+
+#: Linux refuses a process more than vm.max_map_count (65530 by default) mappings, and each compiled XLA program
+#: maps its code and data separately: one pytest worker that keeps every program it compiled (some 600 mappings
+#: for one distinct ddtrack run) reaches the limit after a few hundred runs, and XLA then crashes inside a compile
+#: instead of raising. So each test file starts from empty compilation caches, and a test file that alone comes near
+#: the limit fails, named, instead of a crash later.
+MAPPING_BUDGET = 40_000
+
+
+@pytest.fixture(scope="module", autouse=True)
+def compilations_freed_after_each_file():
+    yield
+    jax.clear_caches()
+    gc.collect()
+
+
+@pytest.fixture(autouse=True)
+def mappings_within_budget():
+    yield
+    if memory_mappings() > MAPPING_BUDGET:
+        jax.clear_caches()
+        gc.collect()
+        held = memory_mappings()
+        assert held <= MAPPING_BUDGET, f"{held} memory mappings held after this test: compiled programs are kept alive"
 
 
 @pytest.fixture(autouse=True)
