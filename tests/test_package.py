@@ -25,7 +25,7 @@ LAYERS = [
     {"controllers", "robots"},
     {"sim"},
     {"identification"},
-    {"scenario", "metrics", "adaptation"},
+    {"scenario", "metrics", "adaptation", "plausibility"},
     {"runner", "plotting"},
     {"animation", "schema"},
     {"rundir"},

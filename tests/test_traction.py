@@ -11,7 +11,8 @@ from conftest import SCENARIOS
 
 import ddtrack
 from ddtrack.model import traction
-from ddtrack.runner import prepare, run_setup, traction_columns
+from ddtrack.plausibility import traction_columns
+from ddtrack.runner import prepare, run_setup
 from ddtrack.sim import timeseries
 
 BODY = {"mass": 4.0, "inertia_axle": 0.2, "com_offset": 0.0, "half_axle": 0.15}

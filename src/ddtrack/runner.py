@@ -20,13 +20,13 @@ import numpy as np
 from jax import Array
 
 from . import feasibility
-from ._format import significant
 from .adaptation import adaptation_warnings
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
-from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance, traction
+from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
+from .plausibility import motor_metrics, motor_warnings, scenario_motor, traction_columns, traction_warnings
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .trajectories import Trajectory
@@ -291,59 +291,6 @@ def _steps(scenario: Scenario) -> dict:
 METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
 
 
-def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray]:
-    """``mu_required`` (the friction coefficient the run needed, :mod:`ddtrack.model.traction`) and the wheel speeds
-    ``wheel_speed_r``, ``wheel_speed_l`` [rad/s] of a torque-driven run on the true plant ``params``; none for a
-    velocity-input plant, whose speeds jump by command and whose contact forces mean nothing."""
-    if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
-        return {}
-    geometry = {
-        "mass": float(params.mass),
-        "inertia_axle": float(params.inertia_axle),
-        "com_offset": float(params.com_offset),
-        "half_axle": float(params.half_axle),
-    }
-    right, left = traction.wheel_speeds(
-        columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius), half_axle=float(params.half_axle)
-    )
-    return {
-        "mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
-        "wheel_speed_r": right,
-        "wheel_speed_l": left,
-    }
-
-
-def traction_warnings(scenario: Scenario, metrics: dict) -> list[dict]:
-    """Say when no floor, or not the scenario's (``plant.floor_friction``), could give the grip the run needed."""
-    needed, floor = metrics.get("mu_required_max"), scenario.plant.floor_friction
-    if needed is None or needed <= floor:
-        return []
-    above = (
-        f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
-    )
-    if needed > traction.MAX_FLOOR_FRICTION:
-        return [
-            {
-                "code": "friction_beyond_any_floor",
-                "message": (
-                    f"the run needed a friction coefficient of {significant(needed)} ({above}); robot wheels get at "
-                    "most about "
-                    f"{traction.MAX_FLOOR_FRICTION:g} from real floors, so a real robot would slip: this result is not "
-                    "physically possible; lower robot.max_torque, the gains, or the initial error"
-                ),
-            }
-        ]
-    return [
-        {
-            "code": "friction_exceeds_floor",
-            "message": (
-                f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels "
-                "would slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's"
-            ),
-        }
-    ]
-
-
 def run_warnings(
     scenario: Scenario, columns: dict, metrics: dict, nmse: Array | Sequence[float] | None = None
 ) -> list[dict]:
@@ -354,6 +301,7 @@ def run_warnings(
     return [
         *feasibility.check(scenario),
         *traction_warnings(scenario, metrics),
+        *motor_warnings(scenario, metrics),
         *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse]),
     ]
 
@@ -377,6 +325,10 @@ def run_metrics(
         failure_time=failure_time,
         floor_friction=scenario.plant.floor_friction,
     )
+    motor = scenario_motor(scenario) if status == "ok" else None
+    if motor is not None:  # a preset's datasheet motor: what the run asked of it, before the warnings
+        metrics = {key: value for key, value in metrics.items() if key != "warnings"}
+        metrics |= motor_metrics(motor, columns, sim.control_period)
     metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse) if status == "ok" else []
     return metrics
 

@@ -1,0 +1,144 @@
+"""Could a real robot have done this run? What it asked of the floor and of the motors (model.md §1.5, §1.7).
+
+A no-slip plant never slips and a torque source never runs out of voltage, so a run can ask for things no robot
+can give. After the fact, from the recorded motion and torques, this module says what was asked:
+
+* the **grip**: the friction coefficient the contact forces needed (:mod:`ddtrack.model.traction`), against the
+  floor's (``plant.floor_friction``) and against any real floor;
+* the **motors**, when the robot is a preset with a datasheet motor: the wheel speed against the motor's no-load
+  speed, and the torque against its torque-speed curve at the wheel's speed of the moment.
+
+Each excess becomes a metric in ``metrics.json`` and a warning that names the number and its remedy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._format import significant
+from .model import DCMotor, RobotParams, traction
+from .model.motors import torque_envelope
+
+#: torque [N m] outside the envelope below this fraction of the stall torque is rounding, not excess
+ENVELOPE_SLACK = 1e-6
+
+
+def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray]:
+    """``mu_required`` (the friction coefficient the run needed, :mod:`ddtrack.model.traction`) and the wheel speeds
+    ``wheel_speed_r``, ``wheel_speed_l`` [rad/s] of a torque-driven run on the true plant ``params``; none for a
+    velocity-input plant, whose speeds jump by command and whose contact forces mean nothing."""
+    if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
+        return {}
+    geometry = {
+        "mass": float(params.mass),
+        "inertia_axle": float(params.inertia_axle),
+        "com_offset": float(params.com_offset),
+        "half_axle": float(params.half_axle),
+    }
+    right, left = traction.wheel_speeds(
+        columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius), half_axle=float(params.half_axle)
+    )
+    return {
+        "mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
+        "wheel_speed_r": right,
+        "wheel_speed_l": left,
+    }
+
+
+def motor_metrics(motor: DCMotor, columns: dict, control_period: float) -> dict[str, float]:
+    """What a run asked of the motor at each wheel, from the columns of :func:`traction_columns` and the torques.
+
+    Returns ``motor_no_load_speed`` [rad/s] (V_s / k_e), ``time_beyond_no_load_speed`` [s] (either wheel faster),
+    ``torque_beyond_envelope_max`` [N m] (the most either wheel's torque lay outside the torque-speed curve at
+    its speed) and ``time_outside_torque_envelope`` [s]; {} without wheel speeds (a velocity-input plant).
+    """
+    if "wheel_speed_r" not in columns:
+        return {}
+    signed = jnp.asarray([columns["wheel_speed_r"], columns["wheel_speed_l"]], dtype=float)
+    speeds = np.abs(np.asarray(signed))
+    torques = np.asarray([columns["tau_r"], columns["tau_l"]], dtype=float)
+    low, high = (np.asarray(end) for end in torque_envelope(motor, signed))
+    excess = np.maximum(np.maximum(torques - high, low - torques), 0.0)
+    outside = excess > ENVELOPE_SLACK * float(motor.stall_torque)
+    no_load = float(motor.no_load_speed)
+    return {
+        "motor_no_load_speed": no_load,
+        "time_beyond_no_load_speed": float(np.count_nonzero(np.any(speeds > no_load, axis=0)) * control_period),
+        "torque_beyond_envelope_max": float(np.max(excess, initial=0.0)),
+        "time_outside_torque_envelope": float(np.count_nonzero(np.any(outside, axis=0)) * control_period),
+    }
+
+
+def scenario_motor(scenario: Any) -> DCMotor | None:
+    """The motor of the scenario's ``[robot] preset`` as a :class:`DCMotor`, or None (no preset, or one without
+    a datasheet motor: the paper's robot)."""
+    from .model.motor_plants import motor_from_datasheet
+
+    robot = scenario.robot.preset_robot()
+    return None if robot is None or robot.motor is None else motor_from_datasheet(robot.motor)
+
+
+def traction_warnings(scenario: Any, metrics: dict) -> list[dict]:
+    """Say when no floor, or not the scenario's (``plant.floor_friction``), could give the grip the run needed."""
+    needed, floor = metrics.get("mu_required_max"), scenario.plant.floor_friction
+    if needed is None or needed <= floor:
+        return []
+    above = (
+        f"above the floor's mu = {floor:g} (plant.floor_friction) for {significant(metrics['time_above_floor_mu'])} s"
+    )
+    if needed > traction.MAX_FLOOR_FRICTION:
+        return [
+            {
+                "code": "friction_beyond_any_floor",
+                "message": (
+                    f"the run needed a friction coefficient of {significant(needed)} ({above}); robot wheels get at "
+                    "most about "
+                    f"{traction.MAX_FLOOR_FRICTION:g} from real floors, so a real robot would slip: this result is not "
+                    "physically possible; lower robot.max_torque, the gains, or the initial error"
+                ),
+            }
+        ]
+    return [
+        {
+            "code": "friction_exceeds_floor",
+            "message": (
+                f"the run needed a friction coefficient of {significant(needed)}, {above}: on that floor the wheels "
+                "would slip; lower robot.max_torque or the gains, or set plant.floor_friction to your floor's"
+            ),
+        }
+    ]
+
+
+def motor_warnings(scenario: Any, metrics: dict) -> list[dict]:
+    """Say when the run's wheels turned faster than the preset's motor can, or took torques it cannot give."""
+    warnings = []
+    motor_name = f"the motor of robot.preset '{scenario.robot.preset}'"
+    if metrics.get("time_beyond_no_load_speed"):
+        warnings.append(
+            {
+                "code": "wheel_speed_beyond_motor",
+                "message": (
+                    f"the wheels reached {significant(metrics['wheel_speed_max'])} rad/s, beyond the no-load speed "
+                    f"{significant(metrics['motor_no_load_speed'])} rad/s of {motor_name}, for "
+                    f"{significant(metrics['time_beyond_no_load_speed'])} s: no voltage could turn them that fast; "
+                    "slow the reference, or simulate the motors with plant.model = 'motor_torque'"
+                ),
+            }
+        )
+    if metrics.get("time_outside_torque_envelope"):
+        warnings.append(
+            {
+                "code": "torque_beyond_motor",
+                "message": (
+                    f"the wheel torques left the torque-speed curve of {motor_name} by up to "
+                    f"{significant(metrics['torque_beyond_envelope_max'])} N m, for "
+                    f"{significant(metrics['time_outside_torque_envelope'])} s: the motors cannot give them at "
+                    "those speeds; lower robot.max_torque or the gains, or simulate the motors with "
+                    "plant.model = 'motor_torque'"
+                ),
+            }
+        )
+    return warnings

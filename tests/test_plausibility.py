@@ -1,0 +1,85 @@
+"""What a run asked of a preset's motors: wheel speed against the no-load speed and torque against the torque-speed
+curve (model.md §1.7), as metrics and warnings; the motor-driven plant, which cannot exceed them, is never flagged."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import SCENARIOS
+
+from ddtrack.model.motor_plants import motor_from_datasheet
+from ddtrack.model.motors import torque_envelope
+from ddtrack.plausibility import motor_metrics
+from ddtrack.robots import preset
+
+BURGER_MOTOR = motor_from_datasheet(preset("turtlebot3_burger").motor)
+NO_LOAD = float(BURGER_MOTOR.no_load_speed)
+STALL = float(BURGER_MOTOR.stall_torque)
+
+
+def _columns(speed_r, speed_l, tau_r, tau_l) -> dict:
+    return {
+        name: np.asarray(value, dtype=float)
+        for name, value in zip(
+            ("wheel_speed_r", "wheel_speed_l", "tau_r", "tau_l"), (speed_r, speed_l, tau_r, tau_l), strict=True
+        )
+    }
+
+
+def test_a_wheel_past_the_no_load_speed_counts_its_periods():
+    speeds = [0.0, 0.5 * NO_LOAD, 1.1 * NO_LOAD, -1.2 * NO_LOAD]  # either direction counts
+    metrics = motor_metrics(BURGER_MOTOR, _columns(speeds, np.zeros(4), np.zeros(4), np.zeros(4)), 0.05)
+    assert metrics["motor_no_load_speed"] == pytest.approx(NO_LOAD)
+    assert metrics["time_beyond_no_load_speed"] == pytest.approx(2 * 0.05)
+
+
+def test_the_torque_excess_is_measured_from_the_curve_at_the_wheels_speed():
+    # at rest the curve spans +- stall; at half the no-load speed the upper end is half the stall torque (model.md
+    # §1.7, a straight line with no current limit below stall); at the no-load speed it is 0
+    speed = np.array([0.0, 0.5 * NO_LOAD, NO_LOAD])
+    high = np.asarray(torque_envelope(BURGER_MOTOR, speed)[1])
+    np.testing.assert_allclose(high, [STALL, STALL / 2, 0.0], atol=1e-9 * STALL)
+    inside = motor_metrics(BURGER_MOTOR, _columns(speed, speed, 0.99 * high, -0.5 * high), 0.05)
+    assert inside["torque_beyond_envelope_max"] == 0.0 and inside["time_outside_torque_envelope"] == 0.0
+    beyond = motor_metrics(BURGER_MOTOR, _columns(speed, speed, high + [0.0, 0.1, 0.3], high), 0.05)
+    assert beyond["torque_beyond_envelope_max"] == pytest.approx(0.3)
+    assert beyond["time_outside_torque_envelope"] == pytest.approx(2 * 0.05)
+
+
+def test_velocity_input_runs_have_no_motor_metrics():
+    assert motor_metrics(BURGER_MOTOR, {"tau_r": np.full(3, np.nan), "tau_l": np.full(3, np.nan)}, 0.05) == {}
+
+
+def _burger_run(cli, out, *overrides: str) -> tuple[int, dict, str]:
+    settings = [
+        "robot.preset=turtlebot3_burger",
+        "controller.kind=backstepping",
+        "simulation.duration=3",
+        "simulation.metric_window=[0, 3]",
+        *overrides,
+    ]
+    code, _, stderr = cli(
+        "run", SCENARIOS / "burger_20hz.toml", *(a for s in settings for a in ("--set", s)), "--out", out
+    )
+    return code, json.loads((out / "metrics.json").read_text()), stderr
+
+
+def test_a_torque_source_driving_a_burger_past_its_motor_is_flagged(tmp_path, cli):
+    code, metrics, stderr = _burger_run(cli, tmp_path / "fast", "trajectory.speed=0.25", "controller.max_velocity=0.3")
+    codes = [w["code"] for w in metrics["warnings"]]
+    assert code == 0 and metrics["status"] == "ok"
+    assert metrics["wheel_speed_max"] > metrics["motor_no_load_speed"] == pytest.approx(NO_LOAD)
+    assert metrics["time_beyond_no_load_speed"] > 0 and metrics["torque_beyond_envelope_max"] > 0.1 * STALL
+    assert {"wheel_speed_beyond_motor", "torque_beyond_motor"} <= set(codes), codes
+    assert "no voltage could turn them that fast" in stderr
+
+
+def test_the_motor_driven_plant_stays_inside_its_curve(tmp_path, cli):
+    code, metrics, _ = _burger_run(cli, tmp_path / "motor", "plant.model=motor_torque")
+    codes = {w["code"] for w in metrics["warnings"]}
+    assert code == 0 and metrics["status"] == "ok"
+    assert metrics["torque_beyond_envelope_max"] <= 1e-6 * STALL and metrics["time_outside_torque_envelope"] == 0
+    assert metrics["time_beyond_no_load_speed"] == 0
+    assert not codes & {"wheel_speed_beyond_motor", "torque_beyond_motor"}
