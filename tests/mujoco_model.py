@@ -56,6 +56,7 @@ def mjcf(
     timestep: float = 1e-4,
     wheel_mass: float | None = None,
     com_height: float = 0.0,
+    integrator: str = "implicitfast",
 ) -> str:
     """The MJCF text of the robot on a floor with friction coefficient ``friction``.
 
@@ -111,7 +112,7 @@ def mjcf(
     )
     return f"""<mujoco model="ddtrack_robot">
   <compiler angle="radian" inertiafromgeom="false" balanceinertia="false"/>
-  <option timestep="{timestep!r}" gravity="0 0 {-GRAVITY!r}" integrator="implicitfast" solver="Newton"
+  <option timestep="{timestep!r}" gravity="0 0 {-GRAVITY!r}" integrator="{integrator}" solver="Newton"
           iterations="100" ls_iterations="50" tolerance="1e-12" cone="elliptic" impratio="10"/>
   <default>
     <geom solref="{timeconst!r} 1" solimp="0.9999 0.9999 0.001"/>
