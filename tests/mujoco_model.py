@@ -10,7 +10,9 @@ How the model matches ddtrack's (docs/model.md §1, §1.6):
   that centre of mass at body x = d ahead of the axle midpoint A (the chassis frame's origin, at axle height R);
 * the wheels are spheres of radius R at body y = +-L (a sphere touches the floor at one point under its centre
   whatever the chassis's small roll; a cylinder's edge contacts would move the contact point), hinged about body y,
-  with spin inertia J_w, driven by ``motor`` actuators (a torque per wheel, the right wheel at y = -L first);
+  with spin inertia J_w, driven by ``motor`` actuators (a torque per wheel, the right wheel at y = -L first); each
+  wheel is a disc of 2 % of m (its spin inertia m_w R^2 / 2 at most J_w), the rest of J_w, a geared rotor's
+  N^2 J_rotor, is the hinge's ``armature``;
 * ddtrack's viscous wheel friction b_w becomes the hinge's ``damping``; its tanh-smoothed Coulomb friction has no
   exact MuJoCo counterpart, so the compared parameters have none (:func:`compared_params`);
 * a frictionless caster (a sphere with ``condim = 1`` and a higher ``priority``, so the contact takes its
@@ -18,11 +20,14 @@ How the model matches ddtrack's (docs/model.md §1, §1.6):
   and carries the load m g d / l_c;
 * the centre of mass sits at floor height by default, so accelerating moves no load between the wheels and the
   caster (the planar model has no height; the normal loads stay the static m g (1 - d / l_c) / 2 per wheel);
-* the floor's friction is mu (elliptic friction cone: the friction circle of docs/model.md, "Traction and slip").
+* the floor's friction is mu, with an elliptic friction cone: the friction circle of docs/model.md §1.5.
 
-The numerical settings matter: a small time step (0.5 ms), the contact's time constant tied to it (MuJoCo wants
-``solref`` time constant >= 2 time steps; 4 here), the Newton solver run to a tight tolerance with enough
-iterations, ``impratio`` > 1 so friction is stiffer than the normal contact, and gravity along -z.
+The numerical settings matter: a small time step (0.1-0.2 ms), the contact's time constant tied to it (2 time steps,
+the least MuJoCo allows), the Newton solver run to a tight tolerance with enough iterations, ``impratio`` > 1 so
+friction is stiffer than the normal contact, and gravity along -z. MuJoCo's soft contacts lag the no-slip
+constraint: a turning robot's wheels creep sideways at about v omega times half the time constant, so the two
+simulators drift apart in proportion to it (docs/reliability.md, "Independent physics check: MuJoCo").
+
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""MuJoCo as an independent physics check of the plant (docs/reliability.md, "Independent physics check").
+"""MuJoCo as an independent physics check of the plant (docs/reliability.md, "Independent physics check: MuJoCo").
 
 ``tests/mujoco_model.py`` builds a MuJoCo robot (free chassis, hinged sphere wheels, frictionless caster, floor with
 friction mu) from the same :class:`~ddtrack.model.RobotParams`. Three checks:
@@ -178,7 +178,7 @@ def test_slip_starts_where_required_friction_reaches_mu(name: str, rate: float, 
 @pytest.mark.parametrize("torque", [4.0, 4.2])
 def test_acceleration_beyond_grip_is_traction_limited(torque: float) -> None:
     """From rest, straight, with torques beyond grip: MuJoCo's robot accelerates at mu times its wheels' normal load
-    over m, within a few per cent of mu g (1 - d / l_c) (docs/model.md, "Traction and slip"), short of the no-slip
+    over m, within a few per cent of mu g (1 - d / l_c) (docs/model.md §1.5), short of the no-slip
     plant's.
 
     The paper's robot with geared wheels (J_w = 0.01 kg m^2), just beyond grip (the no-slip plant would need
@@ -215,3 +215,22 @@ def test_acceleration_beyond_grip_is_traction_limited(torque: float) -> None:
         f"{acceleration:.3f} m/s^2 against mu g (1 - d / l_c) {limit:.3f}"
     )
     assert np.ptp(heights) < 0.1 * float(params.wheel_radius), "the chassis left the floor"
+
+
+def test_paper_torque_limit_is_beyond_a_real_floor() -> None:
+    """The paper's 10 N m per wheel on its 10 kg robot with light wheels: ddtrack's no-slip plant accelerates at
+    40 m/s^2 and says the run needs mu of about 4; MuJoCo's robot on a floor with mu = 1 cannot follow: its wheels
+    spin up, chatter, and throw the chassis off the floor."""
+    params, caster = robot("paper")
+    torques = np.full((30, 2), 10.0)
+    ours = ddtrack_run(params, torques)
+    assert needed_friction(params, caster, ours).max() > 3.5
+    mj = MujocoRobot(params, friction=FLOOR, caster_position=caster, timestep=2e-4)
+    mj.settle()
+    heights = []
+    for u in torques:
+        mj.advance(u, PERIOD)
+        heights.append(mj.data.qpos[2] - float(params.wheel_radius))
+    print(f"10 N m: ddtrack v = {ours[-1, 3]:.2f} m/s, MuJoCo {mj.body()[3]:.2f} m/s, lifted {max(heights):.3f} m")
+    assert max(heights) > float(params.wheel_radius), "MuJoCo's robot stayed on the floor"
+    assert abs(mj.body()[3]) < ours[-1, 3] / 3.0
