@@ -79,6 +79,8 @@ def mjcf(
         Mass of each wheel [kg], part of m (default 2 % of m).
     com_height
         Height of the whole robot's centre of mass above the floor [m] (default 0: no load transfer).
+    integrator
+        MuJoCo's integrator; ``implicitfast`` treats the hinges' damping implicitly.
     """
     m, i_c, d = float(params.mass), float(params.inertia), float(params.com_offset)
     radius, half, j_w = float(params.wheel_radius), float(params.half_axle), float(params.wheel_inertia)
