@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import resource
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,8 @@ os.environ.setdefault("MPLBACKEND", "Agg")  # headless, as the ddtrack command d
 import ddtrack
 from ddtrack.cli import main
 
+# a crashing test process writes no core file: a pytest worker holds gigabytes, which would land in the checkout
+resource.setrlimit(resource.RLIMIT_CORE, (0, resource.getrlimit(resource.RLIMIT_CORE)[1]))
 ddtrack.enable_float64()  # as a script must, before any test builds an array
 # The persistent compilation cache stays off in the test processes (see below), yet JAX 0.10 still hashes every
 # program into a cache key and takes its cache-writing path unless the cache is disabled outright: do that, so the
