@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg
 from jax import Array, lax
 
 
@@ -40,3 +43,28 @@ def semi_implicit_euler_step(
     damped oscillation bounded where explicit Euler inflates it (MPPI's cheap rollouts use it)."""
     v_next = v + h * acceleration(q, v)
     return q + displacement(q, v_next, h), v_next
+
+
+#: gamma of the two-stage Rosenbrock method ROS2 (Verwer et al. 1999): 1 + 1/sqrt(2) makes it L-stable
+ROS2_GAMMA = 1.0 + 1.0 / 2.0**0.5
+
+
+def rosenbrock2_step(f: Callable[[Array], Array], x: Array, h: Array | float) -> Array:
+    """One linearly implicit two-stage Rosenbrock step (ROS2) of the autonomous x_dot = f(x), second order.
+
+    With J = df/dx at ``x`` (``jax.jacfwd``) and W = I - gamma h J: W k1 = f(x), W k2 = f(x + h k1) - 2 k1,
+    x' = x + h (3 k1 + k2) / 2. It solves two linear systems instead of iterating, and is L-stable: a stiff,
+    decaying mode is damped for any step h, where explicit RK4 needs h |lambda| < 2.8.
+    """
+    jac = jax.jacfwd(f)(x)
+    w = jnp.eye(x.shape[0]) - ROS2_GAMMA * h * jac
+    factors = jax.scipy.linalg.lu_factor(w)
+    k1 = jax.scipy.linalg.lu_solve(factors, f(x))
+    k2 = jax.scipy.linalg.lu_solve(factors, f(x + h * k1) - 2.0 * k1)
+    return x + h * (1.5 * k1 + 0.5 * k2)
+
+
+def rosenbrock2(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: int) -> Array:
+    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal :func:`rosenbrock2_step` steps (static)."""
+    h = duration / steps
+    return lax.fori_loop(0, steps, lambda _, z: rosenbrock2_step(f, z, h), x)
