@@ -51,10 +51,11 @@ SLIP_LOGS = Layout(
 )
 #: |h lambda| an explicit RK4 step stays stable at on the negative real axis is 2.78; kept with a margin
 RK4_STABLE_STEP = 2.0
-#: above this many RK4 sub-steps per period the Rosenbrock step is cheaper (one costs about 3 RK4 steps)
-MAX_RK4_SUBSTEPS = 60
-#: sub-steps of the Rosenbrock scheme: it is stable at any step; these resolve the non-stiff motion
-ROSENBROCK_SUBSTEPS = 20
+#: the cost of one Rosenbrock step in RK4 steps (a Jacobian, an LU factorisation, two solves): about 3
+ROSENBROCK_COST = 3
+#: the Rosenbrock scheme's largest step [s]: stable at any step, it needs this to follow the slow motion and the
+#: contact's turn-on (20 sub-steps per 10 ms)
+ROSENBROCK_STEP = 5e-4
 
 
 def require_wheel_inertia(params: RobotParams) -> None:
@@ -214,13 +215,15 @@ def contact_stiffness(
 def choose_integration(stiffness: float, period: float, substeps: int) -> tuple[str, int]:
     """(scheme, sub-steps per period) for a plant of fastest rate ``stiffness`` [1/s] at control ``period`` [s].
 
-    RK4 with n = max(``substeps``, ceil(period stiffness / 2)) steps, so that h lambda <= 2 inside RK4's stability
-    interval (2.78), while n <= 60; beyond, the L-stable Rosenbrock step with max(``substeps``, 20) steps.
+    RK4 needs n = max(``substeps``, ceil(period stiffness / 2)) steps, so that h lambda <= 2 inside RK4's stability
+    interval (2.78). The Rosenbrock step, stable at any step, needs max(``substeps``, ceil(period / 0.5 ms)) and
+    costs about 3 RK4 steps each: the cheaper of the two is chosen.
     """
-    needed = max(substeps, _rk4_steps(stiffness, period))
-    if needed <= MAX_RK4_SUBSTEPS:
-        return "rk4", needed
-    return "rosenbrock", max(substeps, ROSENBROCK_SUBSTEPS)
+    explicit = max(substeps, _rk4_steps(stiffness, period))
+    implicit = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
+    if explicit <= ROSENBROCK_COST * implicit:
+        return "rk4", explicit
+    return "rosenbrock", implicit
 
 
 def _check_caster(params: RobotParams, caster: float) -> None:
@@ -254,9 +257,12 @@ def slip_plant_model(
     _check_caster(nominal, l_c)
     stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor)
     chosen, steps = choose_integration(stiffness, period, substeps)
-    if scheme is not None and scheme != chosen:
+    if scheme is not None and scheme != chosen:  # forced: with the steps the rule gives that scheme
         chosen = scheme
-        steps = max(substeps, ROSENBROCK_SUBSTEPS if scheme == "rosenbrock" else _rk4_steps(stiffness, period))
+        if scheme == "rosenbrock":
+            steps = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
+        else:
+            steps = max(substeps, _rk4_steps(stiffness, period))
 
     def plant_model(params: RobotParams) -> SlipPlant:
         require_wheel_inertia(params)
