@@ -12,7 +12,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
-from ddtrack.model import DynamicPlant, RobotParams, SlipPlant, slip_plant
+from ddtrack.model import DynamicPlant, RobotParams, SlipPlant, slip_plant, slip_plant_model
 from ddtrack.model.slip import GRAVITY, choose_integration, contact_stiffness
 from ddtrack.model.traction import contact_forces
 from ddtrack.robots import preset
@@ -162,6 +162,9 @@ def test_the_slip_plant_needs_wheel_inertia_and_a_caster_beyond_the_centre_of_ma
         slip_plant(RobotParams())
     with pytest.raises(ValueError, match="beyond the centre of mass"):
         slip_plant(GEARED, caster=-0.2)
+    drawn = RobotParams(wheel_inertia=0.005, com_offset=0.4)  # a drawn robot past the nominal's caster
+    with pytest.raises(ValueError, match="beyond the centre of mass"):
+        slip_plant_model(GEARED, caster=CASTER)(drawn)
 
 
 def test_init_and_observe_are_the_body_state_rolling_without_slip():

@@ -51,8 +51,9 @@ SLIP_LOGS = Layout(
 )
 #: |h lambda| an explicit RK4 step stays stable at on the negative real axis is 2.78; kept with a margin
 RK4_STABLE_STEP = 2.0
-#: the cost of one Rosenbrock step in RK4 steps (a Jacobian, an LU factorisation, two solves): about 3
-ROSENBROCK_COST = 3
+#: RK4 is kept while it needs at most this many times the Rosenbrock scheme's steps: one Rosenbrock step (a 5 x 5
+#: Jacobian, its factors, two solves) measured 1.4 RK4 steps in a batch; 2 favours the more accurate RK4 near a tie
+ROSENBROCK_COST = 2
 #: the Rosenbrock scheme's largest step [s]: stable at any step, it needs this to follow the slow motion and the
 #: contact's turn-on (20 sub-steps per 10 ms)
 ROSENBROCK_STEP = 5e-4
@@ -170,8 +171,13 @@ class SlipPlant:
     def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
         """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
         steps = max(substeps, self.substeps)
-        integrate = rosenbrock2 if self.scheme == "rosenbrock" else rk4
-        return integrate(lambda z: self.derivative(z, u, tau_dist), x, period, steps)
+
+        def rate(z: Array) -> Array:
+            return self.derivative(z, u, tau_dist)
+
+        if self.scheme == "rosenbrock":  # implicit in the velocities and spins only: the pose is not stiff
+            return rosenbrock2(rate, x, period, steps, stiff=(3, 8))
+        return rk4(rate, x, period, steps)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """Applied torques, slip speeds and the floor's forces at the start of the period (:data:`SLIP_LOGS`)."""
@@ -216,8 +222,8 @@ def choose_integration(stiffness: float, period: float, substeps: int) -> tuple[
     """(scheme, sub-steps per period) for a plant of fastest rate ``stiffness`` [1/s] at control ``period`` [s].
 
     RK4 needs n = max(``substeps``, ceil(period stiffness / 2)) steps, so that h lambda <= 2 inside RK4's stability
-    interval (2.78). The Rosenbrock step, stable at any step, needs max(``substeps``, ceil(period / 0.5 ms)) and
-    costs about 3 RK4 steps each: the cheaper of the two is chosen.
+    interval (2.78). The Rosenbrock step, stable at any step, needs max(``substeps``, ceil(period / 0.5 ms)); RK4
+    is chosen while it needs at most twice as many steps.
     """
     explicit = max(substeps, _rk4_steps(stiffness, period))
     implicit = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
@@ -265,8 +271,9 @@ def slip_plant_model(
             steps = max(substeps, _rk4_steps(stiffness, period))
 
     def plant_model(params: RobotParams) -> SlipPlant:
-        require_wheel_inertia(params)
-        _check_caster(params, l_c)
+        if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(params)):
+            require_wheel_inertia(params)  # a drawn robot too; traced parameters cannot be checked
+            _check_caster(params, l_c)
         batch = jnp.shape(params.mass)
         like = partial(_broadcast, batch)
         held = None if motor is None else jax.tree_util.tree_map(like, motor)

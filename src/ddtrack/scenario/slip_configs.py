@@ -58,4 +58,8 @@ def slip_options(scenario: Any) -> dict[str, Any]:
 
 def slip_plant_config(params: RobotParams, scenario: Any) -> SlipPlant:
     """The drawn robot ``params`` (alone or a batch) on the scenario's floor (model.md §1.10)."""
-    return slip_plant_model(scenario.plant_params(), **slip_options(scenario))(params)
+    model = slip_plant_model(scenario.plant_params(), **slip_options(scenario))
+    try:
+        return model(params)
+    except ValueError as exc:  # the nominal robot passed: a random draw crossed the line
+        raise ConfigError("randomize", f"a drawn robot: {exc}", "narrow the [randomize] draws") from None
