@@ -37,6 +37,7 @@ from .motors import (
 )
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
+from .slip import SlipPlant, slip_plant, slip_plant_model
 
 __all__ = [
     "PIONEER_3DX_ALTERNATIVE",
@@ -49,6 +50,7 @@ __all__ = [
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "SlipPlant",
     "TorqueDrivenPlant",
     "VelocityDrivenPlant",
     "VelocityDriver",
@@ -69,6 +71,8 @@ __all__ = [
     "reduced_input",
     "reduced_input_inverse",
     "reduced_mass",
+    "slip_plant",
+    "slip_plant_model",
     "torque_driven_model",
     "torque_driver",
     "torque_envelope",

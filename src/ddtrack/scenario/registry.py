@@ -36,6 +36,7 @@ from .baseline_configs import (
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
 from .motor_configs import lag_plant, motor_torque_plant, motor_velocity_plant
+from .slip_configs import slip_plant_config
 from .trajectory_configs import (
     CircleTrajectory,
     FigureEightTrajectory,
@@ -465,6 +466,12 @@ register_plant(
     "lag",
     lag_plant,
     summary="A velocity-commanded base's identified first-order lags (Martins et al.), from [robot] preset.",
+    reads_scenario=True,
+)
+register_plant(
+    "slip",
+    slip_plant_config,
+    summary="The robot on a floor of finite grip, its wheels free to slip (needs wheel_inertia > 0).",
     reads_scenario=True,
 )
 register_plant(

@@ -1,0 +1,295 @@
+"""The robot on a floor of finite grip: wheels that can slip (model.md §1.10).
+
+The no-slip constraint of model.md §1.1 is replaced by contact forces. The body moves in the plane with three
+velocities at the axle midpoint A, in the body frame: forward speed u, lateral speed w and yaw rate r; each wheel
+spins at its own speed phi_dot_i. Each wheel's contact point slides over the floor at
+
+    s_R = (u + L r - R phi_dot_R, w),        s_L = (u - L r - R phi_dot_L, w)
+
+and the floor pushes back along a regularised Coulomb friction circle, F_i = -mu N_i s_i / sqrt(|s_i|^2 + eps_s^2),
+with the static normal load N_i = m g (1 - d / l_c) / 2 of a frictionless caster at body x = l_c. Newton-Euler
+about the centre of mass C = (d, 0) and each wheel's spin give
+
+    m (u_dot - r w - d r^2) = F_Rx + F_Lx
+    m (w_dot + d r_dot + r u) = F_Ry + F_Ly
+    I_C r_dot = L (F_Rx - F_Lx) - d (F_Ry + F_Ly)
+    J_w phi_ddot_i = tau_i - tau_f,i - tau_dw,i - R F_ix
+
+so the wheels need spin inertia (J_w > 0). The contact is stiff: :func:`contact_stiffness` estimates its fastest
+rate and :func:`choose_integration` the scheme and sub-steps from it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from functools import partial
+from typing import Any, ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from .._pytree import pytree_dataclass, static_field
+from ..integrators import rk4, rosenbrock2
+from ..layout import WHEEL_TORQUES, Layout
+from .dynamics import wheel_friction
+from .motors import DCMotor, torque_driver
+from .params import RobotParams
+
+GRAVITY = 9.80665  #: standard gravity [m/s^2] (the value of model/traction.py)
+#: the state of :class:`SlipPlant`: pose of A, its body-frame velocity and yaw rate, the wheels' spin speeds
+SLIP_STATE = Layout(
+    ("x", "y", "theta", "u", "w", "r", "phidot_r", "phidot_l"),
+    ("m", "m", "rad", "m/s", "m/s", "rad/s", "rad/s", "rad/s"),
+)
+#: what it logs each period: applied torques (named as DynamicPlant's), slip speeds and the floor's forces
+SLIP_LOGS = Layout(
+    ("tau_r", "tau_l", "slip_r", "slip_l", "slip_lateral", "force_rx", "force_lx", "force_y"),
+    ("N m", "N m", "m/s", "m/s", "m/s", "N", "N", "N"),
+)
+#: |h lambda| an explicit RK4 step stays stable at on the negative real axis is 2.78; kept with a margin
+RK4_STABLE_STEP = 2.0
+#: RK4 is kept while it needs at most this many times the Rosenbrock scheme's steps: one Rosenbrock step (a 5 x 5
+#: Jacobian, its factors, two solves) measured 1.4 RK4 steps in a batch; 2 favours the more accurate RK4 near a tie
+ROSENBROCK_COST = 2
+#: the Rosenbrock scheme's largest step [s]: stable at any step, it needs this to follow the slow motion and the
+#: contact's turn-on (20 sub-steps per 10 ms)
+ROSENBROCK_STEP = 5e-4
+
+
+def require_wheel_inertia(params: RobotParams) -> None:
+    """A ValueError unless every J_w > 0: with massless wheels the wheel equation is algebraic, and a wheel pushed
+    beyond grip would spin up infinitely fast."""
+    if np.any(np.asarray(params.wheel_inertia) <= 0.0):
+        raise ValueError(
+            "the slip plant needs wheel_inertia J_w > 0 [kg m^2] (wheel plus N^2 J_rotor): with massless wheels "
+            "a wheel beyond grip accelerates without bound"
+        )
+
+
+def load_fraction(params: RobotParams, caster: Array | float) -> Array:
+    """1 - d / l_c: the share of the weight the drive wheels carry with a caster at body x = l_c (1 with none,
+    l_c = inf)."""
+    return 1.0 - jnp.asarray(params.com_offset) / jnp.asarray(caster)
+
+
+@pytree_dataclass
+class SlipPlant:
+    """The robot with finite grip (model.md §1.10): input wheel torques [N m], state :data:`SLIP_STATE`.
+
+    Attributes
+    ----------
+    params : RobotParams
+        The robot; ``wheel_inertia`` must be > 0.
+    friction : float
+        Floor friction coefficient mu.
+    slip_speed : float
+        Regularising slip speed eps_s [m/s] at which friction is fully developed.
+    caster : float
+        Body x of the frictionless caster l_c [m], same side as the centre of mass; ``inf`` for none (N = m g / 2).
+    motor : DCMotor or None
+        When given, the torque command goes through its current-controlled driver, so back-EMF bounds the wheels'
+        spin; else the torques apply as commanded, within +-``params.max_torque``.
+    scheme : str
+        ``"rk4"`` or ``"rosenbrock"`` (static).
+    substeps : int
+        Sub-steps per control period at least (static); the simulator's count is used when larger.
+    """
+
+    params: RobotParams
+    friction: Array | float = 0.8
+    slip_speed: Array | float = 1e-2
+    caster: Array | float = math.inf
+    motor: DCMotor | None = None
+    scheme: str = static_field(default="rk4")
+    substeps: int = static_field(default=1)
+    state_layout: ClassVar[Layout] = SLIP_STATE
+    input_layout: ClassVar[Layout] = WHEEL_TORQUES
+    logged_layout: ClassVar[Layout] = SLIP_LOGS
+
+    @property
+    def input_kind(self) -> str:
+        return "torque"
+
+    def init(self, body: Array) -> Array:
+        """BODY [x, y, theta, v, omega] with no lateral speed and the wheels rolling without slip."""
+        v, omega = body[3], body[4]
+        p = self.params
+        spin = jnp.stack([v + p.half_axle * omega, v - p.half_axle * omega]) / p.wheel_radius
+        return jnp.concatenate([body[:3], jnp.stack([v, jnp.zeros_like(v), omega]), spin])
+
+    def observe(self, x: Array) -> Array:
+        """BODY [x, y, theta, u, r]: the pose of A, its forward speed and the yaw rate."""
+        return jnp.stack([x[0], x[1], x[2], x[3], x[5]])
+
+    def saturate(self, u: Array) -> Array:
+        """The command within +-max_torque, or +-the motor's stall torque (the speed-dependent limit acts in the
+        ODE)."""
+        limit = self.params.max_torque if self.motor is None else self.motor.stall_torque
+        return jnp.clip(u, -limit, limit)
+
+    def applied(self, x: Array, u: Array) -> Array:
+        """The wheel torques [N m] at state ``x`` under the command ``u``: through the motor's driver if any."""
+        if self.motor is None:
+            return u
+        return torque_driver(self.motor, u, x[6:8])[0]
+
+    def slips(self, x: Array) -> tuple[Array, Array, Array]:
+        """(longitudinal slip of the right and left contact, lateral slip w) [m/s]."""
+        p = self.params
+        u, w, r = x[3], x[4], x[5]
+        return u + p.half_axle * r - p.wheel_radius * x[6], u - p.half_axle * r - p.wheel_radius * x[7], w
+
+    def forces(self, x: Array) -> tuple[Array, Array, Array, Array]:
+        """(F_Rx, F_Ry, F_Lx, F_Ly) [N]: the floor's force on each wheel in the body frame."""
+        p = self.params
+        right, left, lateral = self.slips(x)
+        normal = p.mass * GRAVITY * load_fraction(p, self.caster) / 2.0
+        eps2 = jnp.asarray(self.slip_speed) ** 2
+        # regularised Coulomb circle: the full mu N once the slip is well above eps_s
+        scale_r = -self.friction * normal / jnp.sqrt(right**2 + lateral**2 + eps2)
+        scale_l = -self.friction * normal / jnp.sqrt(left**2 + lateral**2 + eps2)
+        return scale_r * right, scale_r * lateral, scale_l * left, scale_l * lateral
+
+    def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
+        """The state's rate under the wheel torque command ``u`` and disturbance torques ``tau_dist`` [N m]."""
+        p = self.params
+        theta, fwd, lat, r = x[2], x[3], x[4], x[5]
+        f_rx, f_ry, f_lx, f_ly = self.forces(x)
+        f_x, f_y = f_rx + f_lx, f_ry + f_ly
+        r_dot = (p.half_axle * (f_rx - f_lx) - p.com_offset * f_y) / p.inertia
+        u_dot = f_x / p.mass + r * lat + p.com_offset * r**2
+        w_dot = f_y / p.mass - p.com_offset * r_dot - r * fwd
+        drive = self.applied(x, u) - wheel_friction(p, x[6:8]) - tau_dist
+        spin_dot = (drive - p.wheel_radius * jnp.stack([f_rx, f_lx])) / p.wheel_inertia
+        c, s = jnp.cos(theta), jnp.sin(theta)
+        pose_dot = jnp.stack([fwd * c - lat * s, fwd * s + lat * c, r])
+        return jnp.concatenate([pose_dot, jnp.stack([u_dot, w_dot, r_dot]), spin_dot])
+
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
+        """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
+        steps = max(substeps, self.substeps)
+
+        def rate(z: Array) -> Array:
+            return self.derivative(z, u, tau_dist)
+
+        if self.scheme == "rosenbrock":  # implicit in the velocities and spins only: the pose is not stiff
+            return rosenbrock2(rate, x, period, steps, stiff=(3, 8))
+        return rk4(rate, x, period, steps)
+
+    def logged(self, x: Array, u: Array) -> dict[str, Array]:
+        """Applied torques, slip speeds and the floor's forces at the start of the period (:data:`SLIP_LOGS`)."""
+        tau = self.applied(x, u)
+        f_rx, f_ry, f_lx, f_ly = self.forces(x)
+        right, left, lateral = self.slips(x)
+        values = (tau[0], tau[1], right, left, lateral, f_rx, f_lx, f_ry + f_ly)
+        return dict(zip(SLIP_LOGS.names, values, strict=True))
+
+
+def contact_stiffness(
+    params: RobotParams,
+    friction: float,
+    slip_speed: float,
+    caster: float = math.inf,
+    motor: DCMotor | None = None,
+) -> float:
+    """An upper estimate of the fastest decay rate [1/s] of the slip plant, from nominal (float) numbers.
+
+    Near zero slip the contact is a damper of rate mu N / eps_s on the slip velocities G z, z = (u, w, r, phi_dot_R,
+    phi_dot_L), so its fastest mode is (mu N / eps_s) lambda_max(M_z^-1 G^T G), M_z the mass matrix of z (yaw about
+    A). Added to it: the wheel friction's slope (b_w + tau_c / eps_f) / J_w and the back-EMF's eta k_t k_e / (R_a J_w)
+    (a wheel on the torque-speed curve), each acting on a wheel's spin alone.
+    """
+    m, d, inertia = float(params.mass), float(params.com_offset), float(params.inertia)
+    radius, half, spin = float(params.wheel_radius), float(params.half_axle), float(params.wheel_inertia)
+    mass_matrix = np.diag([m, m, inertia + m * d * d, spin, spin])
+    mass_matrix[1, 2] = mass_matrix[2, 1] = m * d
+    slip_map = np.array(
+        [[1.0, 0.0, half, -radius, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0], [1.0, 0.0, -half, 0.0, -radius], [0, 1, 0, 0, 0]]
+    )
+    modes = np.linalg.eigvals(np.linalg.solve(mass_matrix, slip_map.T @ slip_map))
+    normal = m * GRAVITY * (1.0 - d / caster) / 2.0
+    rate = friction * normal / slip_speed * float(np.max(modes.real))
+    rate += (float(params.viscous_friction) + float(params.coulomb_friction) / float(params.friction_smoothing)) / spin
+    if motor is not None:
+        rate += float(motor.efficiency * motor.torque_constant * motor.back_emf / motor.resistance) / spin
+    return rate
+
+
+def choose_integration(stiffness: float, period: float, substeps: int) -> tuple[str, int]:
+    """(scheme, sub-steps per period) for a plant of fastest rate ``stiffness`` [1/s] at control ``period`` [s].
+
+    RK4 needs n = max(``substeps``, ceil(period stiffness / 2)) steps, so that h lambda <= 2 inside RK4's stability
+    interval (2.78). The Rosenbrock step, stable at any step, needs max(``substeps``, ceil(period / 0.5 ms)); RK4
+    is chosen while it needs at most twice as many steps.
+    """
+    explicit = max(substeps, _rk4_steps(stiffness, period))
+    implicit = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
+    if explicit <= ROSENBROCK_COST * implicit:
+        return "rk4", explicit
+    return "rosenbrock", implicit
+
+
+def _check_caster(params: RobotParams, caster: float) -> None:
+    ratio = np.asarray(params.com_offset) / caster
+    if np.any(ratio < 0.0) or np.any(ratio >= 1.0):
+        raise ValueError(
+            f"the caster at body x = {caster} m must lie beyond the centre of mass, on its side (0 <= d / l_c < 1)"
+        )
+
+
+def slip_plant_model(
+    nominal: RobotParams,
+    *,
+    friction: float = 0.8,
+    slip_speed: float = 1e-2,
+    caster: float | None = None,
+    motor: DCMotor | None = None,
+    period: float = 0.01,
+    substeps: int = 10,
+    scheme: str | None = None,
+) -> Callable[[RobotParams], SlipPlant]:
+    """A ``Setup.plant_model`` giving the :class:`SlipPlant` of a drawn robot, alone or as a batch (the scalars
+    take the parameters' leading batch axis), its integration chosen once from the ``nominal`` robot (floats) by
+    :func:`choose_integration` at control ``period`` [s] and the simulator's ``substeps``.
+
+    ``scheme`` forces ``"rk4"`` (with the steps the stability rule needs) or ``"rosenbrock"``. Raises ValueError for
+    J_w <= 0 or a caster not beyond the centre of mass (here and for every drawn robot).
+    """
+    require_wheel_inertia(nominal)
+    l_c = math.inf if caster is None else float(caster)
+    _check_caster(nominal, l_c)
+    stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor)
+    chosen, steps = choose_integration(stiffness, period, substeps)
+    if scheme is not None and scheme != chosen:  # forced: with the steps the rule gives that scheme
+        chosen = scheme
+        if scheme == "rosenbrock":
+            steps = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
+        else:
+            steps = max(substeps, _rk4_steps(stiffness, period))
+
+    def plant_model(params: RobotParams) -> SlipPlant:
+        if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(params)):
+            require_wheel_inertia(params)  # a drawn robot too; traced parameters cannot be checked
+            _check_caster(params, l_c)
+        batch = jnp.shape(params.mass)
+        like = partial(_broadcast, batch)
+        held = None if motor is None else jax.tree_util.tree_map(like, motor)
+        return SlipPlant(params, like(friction), like(slip_speed), like(l_c), held, chosen, steps)
+
+    return plant_model
+
+
+def _rk4_steps(stiffness: float, period: float) -> int:
+    return math.ceil(period * stiffness / RK4_STABLE_STEP)
+
+
+def _broadcast(batch: tuple[int, ...], value: Any) -> Array:
+    return jnp.broadcast_to(jnp.asarray(value, dtype=float), batch)
+
+
+def slip_plant(params: RobotParams, **options: Any) -> SlipPlant:
+    """The :class:`SlipPlant` of one robot (floats), options as :func:`slip_plant_model`'s."""
+    return slip_plant_model(params, **options)(params)

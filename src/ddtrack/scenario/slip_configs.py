@@ -1,0 +1,65 @@
+"""``[plant] model = "slip"``: the scenario's true robot on a floor of finite grip (model.md §1.10).
+
+The floor's friction coefficient is ``plant.floor_friction``, its slip speed ``plant.slip_speed``; the caster is
+``plant.caster_position`` or the ``[robot] preset``'s. A preset with a motor drives the wheels through its
+current-controlled driver (back-EMF bounds their spin); otherwise the torques apply as commanded, within
+max_torque. The integration scheme and sub-steps are chosen once from the nominal true robot.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..errors import ConfigError
+from ..model import DCMotor, RobotParams
+from ..model.motor_plants import motor_from_datasheet
+from ..model.slip import SlipPlant, slip_plant_model
+
+
+def _preset(scenario: Any) -> Any:
+    from ..robots import PRESETS  # robots sits above the scenario layer
+
+    name = scenario.robot.preset
+    return PRESETS.get(name) if name is not None else None
+
+
+def slip_options(scenario: Any) -> dict[str, Any]:
+    """The slip plant's floor, caster and motor from the scenario, checked; a ConfigError naming the field."""
+    robot = _preset(scenario)
+    nominal = scenario.plant_params()
+    if nominal.wheel_inertia <= 0.0:
+        raise ConfigError(
+            "plant.wheel_inertia",
+            "model 'slip' needs wheels with spin inertia J_w > 0: a massless wheel beyond grip spins up without bound",
+            "set plant.wheel_inertia (or robot.wheel_inertia) > 0 [kg m^2], e.g. the wheel plus N^2 J_rotor",
+        )
+    caster = scenario.plant.caster_position
+    if caster is None and robot is not None:
+        caster = robot.caster_position
+    if caster is not None and not 0.0 <= nominal.com_offset / caster < 1.0:
+        raise ConfigError(
+            "plant.caster_position",
+            f"the caster at {caster} m must lie beyond the centre of mass (d = {nominal.com_offset} m), on its side",
+            "give a caster position with 0 <= d / caster_position < 1, or leave it out (no caster load)",
+        )
+    motor: DCMotor | None = None
+    if robot is not None and robot.motor is not None:
+        motor = motor_from_datasheet(robot.motor)
+    sim = scenario.simulation
+    return {
+        "friction": scenario.plant.floor_friction,
+        "slip_speed": scenario.plant.slip_speed,
+        "caster": caster,
+        "motor": motor,
+        "period": sim.control_period,
+        "substeps": sim.substeps,
+    }
+
+
+def slip_plant_config(params: RobotParams, scenario: Any) -> SlipPlant:
+    """The drawn robot ``params`` (alone or a batch) on the scenario's floor (model.md §1.10)."""
+    model = slip_plant_model(scenario.plant_params(), **slip_options(scenario))
+    try:
+        return model(params)
+    except ValueError as exc:  # the nominal robot passed: a random draw crossed the line
+        raise ConfigError("randomize", f"a drawn robot: {exc}", "narrow the [randomize] draws") from None
