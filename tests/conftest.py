@@ -14,6 +14,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")  # headless, as the ddtrack command d
 
 import ddtrack
 from ddtrack.cli import main
+from ddtrack.compilations import mapping_limit, memory_mappings, release_compilations
 
 # a crashing test process writes no core file: a pytest worker holds gigabytes, which would land in the checkout
 resource.setrlimit(resource.RLIMIT_CORE, (0, resource.getrlimit(resource.RLIMIT_CORE)[1]))
@@ -54,21 +55,12 @@ def no_persistent_cache_in_this_process():
         yield
 
 
-def memory_mappings() -> int:
-    """How many memory mappings this process holds (Linux; 0 elsewhere)."""
-    try:
-        with open("/proc/self/maps", "rb") as maps:
-            return sum(1 for _ in maps)
-    except OSError:
-        return 0
-
-
-#: Linux refuses a process more than vm.max_map_count (65530 by default) mappings, and each compiled XLA program
-#: maps its code and data separately: one pytest worker that keeps every program it compiled (some 600 mappings
-#: for one distinct ddtrack run) reaches the limit after a few hundred runs, and XLA then crashes inside a compile
-#: instead of raising. So each test file starts from empty compilation caches, and a test file that alone comes near
-#: the limit fails, named, instead of a crash later.
-MAPPING_BUDGET = 40_000
+#: Each compiled XLA program holds memory mappings of its own, and Linux refuses a process more than
+#: vm.max_map_count (65,530) of them; at the limit XLA crashes inside a compile (ddtrack.compilations). A pytest
+#: worker that kept every program compiled by some 400 tests held 65,174 (measured): so each test file starts from
+#: empty compilation caches, and a test after which the process still holds more than this share of the limit,
+#: once released, fails named instead of a crash later.
+MAPPING_SHARE_ALLOWED = 0.6
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -81,11 +73,11 @@ def compilations_freed_after_each_file():
 @pytest.fixture(autouse=True)
 def mappings_within_budget():
     yield
-    if memory_mappings() > MAPPING_BUDGET:
-        jax.clear_caches()
-        gc.collect()
-        held = memory_mappings()
-        assert held <= MAPPING_BUDGET, f"{held} memory mappings held after this test: compiled programs are kept alive"
+    if release_compilations():
+        held, limit = memory_mappings(), mapping_limit()
+        assert held is None or limit is None or held <= MAPPING_SHARE_ALLOWED * limit, (
+            f"{held} memory mappings held after this test (limit {limit}): compiled programs are kept alive"
+        )
 
 
 @pytest.fixture(autouse=True)

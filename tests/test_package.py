@@ -18,7 +18,18 @@ PACKAGE = ROOT / "src" / "ddtrack"
 
 # DESIGN 2: imports point down only; modules on one line are siblings and may not import each other.
 LAYERS = [
-    {"errors", "geometry", "_pytree", "_ordered", "_after_import", "_format", "shipped", "layout", "integrators"},
+    {
+        "errors",
+        "geometry",
+        "_pytree",
+        "_ordered",
+        "_after_import",
+        "_format",
+        "shipped",
+        "layout",
+        "integrators",
+        "compilations",
+    },
     {"precision"},
     {"outdir", "feasibility"},
     {"model", "trajectories"},

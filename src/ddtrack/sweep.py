@@ -32,6 +32,7 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from .compilations import release_compilations
 from .errors import ConfigError, did_you_mean
 from .metrics import warning_counts
 from .outdir import atomic_write
@@ -272,6 +273,7 @@ def run_chunk(
     """The task: simulate ``runs`` ((key, seed) pairs, at most ``chunk``) as one vmapped batch, padded to
     ``chunk`` runs; return one record per run. An exception becomes error records, not a lost task."""
     seeds = [seed for _, seed in runs]
+    release_compilations()  # a worker compiles every configuration it runs: stay clear of the mapping limit
     try:
         rows = monte_carlo(scenario, seeds + [seeds[0]] * (chunk - len(seeds)), chunk_size=chunk)[: len(seeds)]
     except Exception as exc:

@@ -1,0 +1,48 @@
+"""Compiled programs in a long-lived process: release them before the operating system's limit is reached.
+
+XLA maps the code and data of every program it compiles into the process separately, and JAX keeps every
+compiled program for reuse. Linux refuses a process more than ``vm.max_map_count`` mappings (65,530 by default);
+at the limit an XLA compile fails to allocate and the process crashes (a segmentation fault, not an exception).
+One distinct ddtrack run compiles programs holding about 600 mappings, so a process that runs a few hundred
+distinct configurations (a sweep's worker, a test session) reaches it. :func:`release_compilations` empties JAX's
+caches once a process holds a given share of its limit: later runs of a released program compile it again.
+"""
+
+from __future__ import annotations
+
+import gc
+
+MAP_LIMIT_FILE = "/proc/sys/vm/max_map_count"
+OWN_MAPS_FILE = "/proc/self/maps"
+RELEASE_AT = 0.5  #: the share of the mapping limit at which compiled programs are released
+
+
+def memory_mappings() -> int | None:
+    """How many memory mappings this process holds, or None where the system does not say (not Linux)."""
+    try:
+        with open(OWN_MAPS_FILE, "rb") as maps:
+            return sum(1 for _ in maps)
+    except OSError:
+        return None
+
+
+def mapping_limit() -> int | None:
+    """The most mappings a process may hold (``vm.max_map_count``), or None where the system does not say."""
+    try:
+        with open(MAP_LIMIT_FILE) as limit:
+            return int(limit.read())
+    except (OSError, ValueError):
+        return None
+
+
+def release_compilations(share: float = RELEASE_AT) -> bool:
+    """Empty JAX's compilation caches if this process holds more than ``share`` of its mapping limit; return
+    whether it did. Cheap when it does nothing (one read of the process's mapping list)."""
+    held, limit = memory_mappings(), mapping_limit()
+    if held is None or limit is None or held <= share * limit:
+        return False
+    import jax
+
+    jax.clear_caches()
+    gc.collect()  # the executables go with their last Python reference
+    return True
