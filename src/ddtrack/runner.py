@@ -288,7 +288,18 @@ def _steps(scenario: Scenario) -> dict:
     }
 
 
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
+METRIC_LOGS = (
+    "tau_r",
+    "tau_l",
+    "saturated",
+    "kx",
+    "ky",
+    "ktheta",
+    "gate",
+    "odom_ex",
+    "odom_ey",
+    "odom_etheta",
+)  #: the series metrics and warnings read
 
 
 def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray]:

@@ -37,6 +37,7 @@ from .motors import (
 )
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
+from .sensed import SensedPlant, Sensing
 
 __all__ = [
     "PIONEER_3DX_ALTERNATIVE",
@@ -49,6 +50,8 @@ __all__ = [
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "SensedPlant",
+    "Sensing",
     "TorqueDrivenPlant",
     "VelocityDrivenPlant",
     "VelocityDriver",

@@ -1,0 +1,294 @@
+"""Any plant seen through latency, wheel encoders and odometry (model.md §1.9): :class:`SensedPlant`.
+
+The wrapper is itself a plant (``init``/``saturate``/``advance``/``observe``/``logged``), so the simulator, a batch
+and the Gymnasium environment step it like any other. Its state is the inner plant's, then what the sensing chain
+carries from one period to the next::
+
+    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed measurements]
+
+``observe(x)`` stays the inner plant's, the **true** body, which the simulator records and the metrics read.
+``measure(x)`` is what the controller's sensors report: the odometry estimate (or the true body without odometry),
+as it was ``measurement_periods`` periods ago. The queues are internal: ``recorded_layout`` names the states a run
+records (the inner plant's, the wheel angles and the estimate), so a long delay does not flood the time series.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass, static_field
+from ..integrators import rk4
+from ..layout import BODY, Layout, velocity
+from .plants import ODEPlant
+from .sensing import encoder_angle, odometry_step, split_delay
+
+#: the wheel angles a plant with encoders integrates [rad]
+WHEEL_ANGLES = Layout(("phi_r", "phi_l"), ("rad", "rad"))
+#: the odometry estimate, a BODY vector
+ODOMETRY = Layout(tuple(f"odom_{name}" for name in BODY.names), BODY.units)
+#: estimated minus true pose, logged each period
+ODOMETRY_ERROR = Layout(("odom_ex", "odom_ey", "odom_etheta"), ("m", "m", "rad"))
+
+
+def _queue_layout(prefix: str, layout: Layout, length: int) -> Layout:
+    """The names of a queue of ``length`` vectors of ``layout``, oldest first (``queued_0_tau_r``, ...)."""
+    names = tuple(f"{prefix}_{i}_{name}" for i in range(length) for name in layout.names)
+    return Layout(names, layout.units * length)
+
+
+def _join(*layouts: Layout) -> Layout:
+    return Layout(sum((lay.names for lay in layouts), ()), sum((lay.units for lay in layouts), ()))
+
+
+@pytree_dataclass
+class SensedPlant:
+    """``inner`` with an actuation delay, a measurement delay, encoders and odometry (model.md §1.9).
+
+    Attributes
+    ----------
+    inner
+        the true robot, any :class:`~ddtrack.model.Plant`
+    nominal_radius, nominal_half_axle
+        the controller's R-hat, L-hat [m], with which odometry turns encoder increments into motion
+    true_radius, true_half_axle
+        the true R, L [m], with which the wheels turn as the body moves (unless ``inner`` has ``wheel_rates(x)``,
+        e.g. a plant whose wheels slip)
+    command_periods, command_fraction
+        the actuation delay tau_a = (k + f) T_c as k (whole periods) and f in [0, 1) (static)
+    measurement_periods
+        the measurement delay in whole periods (static)
+    encoder_counts
+        counts per wheel revolution; 0: the encoders read the exact angle (static)
+    odometry
+        the controller sees the odometry estimate instead of the true body (static)
+    """
+
+    inner: Any
+    nominal_radius: Array | float
+    nominal_half_axle: Array | float
+    true_radius: Array | float
+    true_half_axle: Array | float
+    command_periods: int = static_field(default=0)
+    command_fraction: float = static_field(default=0.0)
+    measurement_periods: int = static_field(default=0)
+    encoder_counts: int = static_field(default=0)
+    odometry: bool = static_field(default=False)
+
+    # --- layouts ------------------------------------------------------------------------------------------------
+
+    @property
+    def queue_length(self) -> int:
+        """Commands waiting: k, and one more when a fraction of a period splits it (the command that acts first)."""
+        return self.command_periods + (1 if self.command_fraction > 0.0 else 0)
+
+    @property
+    def _parts(self) -> tuple[Layout, ...]:
+        odometry = (WHEEL_ANGLES, ODOMETRY) if self.odometry else (Layout((), ()), Layout((), ()))
+        return (
+            self.inner.state_layout,
+            *odometry,
+            _queue_layout("queued", self.inner.input_layout, self.queue_length),
+            _queue_layout("delayed", BODY, self.measurement_periods),
+        )
+
+    @property
+    def state_layout(self) -> Layout:
+        return _join(*self._parts)
+
+    @property
+    def recorded_layout(self) -> Layout:
+        """The states a run records: the inner plant's, the wheel angles and the odometry estimate (not the queues)."""
+        return _join(*self._parts[:3])
+
+    @property
+    def input_layout(self) -> Layout:
+        return self.inner.input_layout
+
+    @property
+    def logged_layout(self) -> Layout:
+        return _join(self.inner.logged_layout, ODOMETRY_ERROR) if self.odometry else self.inner.logged_layout
+
+    @property
+    def input_kind(self) -> str:
+        return self.inner.input_kind
+
+    def split(self, x: Array) -> tuple[Array, Array, Array, Array, Array]:
+        """(inner state, wheel angles (2,), estimate (5,), command queue (q, m), measurement queue (d, 5)) of x."""
+        sizes = [len(layout) for layout in self._parts]
+        bounds = [sum(sizes[:i]) for i in range(len(sizes) + 1)]
+        inner, phi, estimate, queued, delayed = (x[bounds[i] : bounds[i + 1]] for i in range(len(sizes)))
+        return (
+            inner,
+            phi,
+            estimate,
+            queued.reshape(self.queue_length, len(self.input_layout)),
+            delayed.reshape(self.measurement_periods, len(BODY)),
+        )
+
+    # --- the plant ----------------------------------------------------------------------------------------------
+
+    def init(self, body: Array) -> Array:
+        """The inner state; wheel angles 0 and the estimate at the true start (the robot is told where it starts);
+        the queue full of the command held before the run (no torque, or the initial velocity for a velocity-
+        commanded robot: it was cruising); the measurement line full of the first measurement."""
+        inner = self.inner.init(body)
+        held = velocity(body) if self.input_kind == "velocity" else jnp.zeros(len(self.input_layout))
+        odometry = [jnp.zeros(2), body] if self.odometry else []
+        first = body if self.odometry else self.inner.observe(inner)
+        queued = jnp.tile(held, self.queue_length)
+        delayed = jnp.tile(first, self.measurement_periods)
+        return jnp.concatenate([inner, *odometry, queued, delayed])
+
+    def saturate(self, u: Array) -> Array:
+        return self.inner.saturate(u)
+
+    def observe(self, x: Array) -> Array:
+        """The true body (what the run records and its metrics read)."""
+        return self.inner.observe(self.split(x)[0])
+
+    def reading(self, x: Array) -> Array:
+        """What the sensors read at x before any delay: the odometry estimate, or the true body without it."""
+        inner, _, estimate, _, _ = self.split(x)
+        return estimate if self.odometry else self.inner.observe(inner)
+
+    def measure(self, x: Array) -> Array:
+        """What the controller's sensors report at x (a BODY vector): the reading of ``measurement_periods`` ago."""
+        delayed = self.split(x)[4]
+        return delayed[0] if self.measurement_periods else self.reading(x)
+
+    def stretches(self, x: Array, u: Array) -> tuple[Array, list[tuple[Array, float]]]:
+        """Queue the command ``u`` of this period: (the queue after it, [(command, share of the period), ...]), the
+        commands acting over the period in order (one, or two when a fraction of a period splits it)."""
+        queued = self.split(x)[3]
+        if self.queue_length == 0:
+            return queued, [(u, 1.0)]
+        line = jnp.concatenate([queued, u[None]])
+        if self.command_fraction > 0.0:  # the older command acts first, for the fraction f of the period
+            return line[1:], [(line[0], self.command_fraction), (line[1], 1.0 - self.command_fraction)]
+        return line[1:], [(line[0], 1.0)]
+
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
+        """One control period: the queued commands drive the inner plant (the wheels turning with it), then the
+        odometry adds the period's encoder increments, and the measurement line takes this period's reading."""
+        inner, phi, estimate, _, delayed = self.split(x)
+        queued, acting = self.stretches(x, u)
+        inner_next, phi_next = inner, phi
+        done = 0
+        for i, (command, share) in enumerate(acting):
+            # the substeps shared by the stretches in proportion, at least one each
+            steps = substeps - done if i == len(acting) - 1 else max(1, round(substeps * share))
+            steps = max(1, steps)
+            done += steps
+            inner_next, phi_next = self._drive(inner_next, phi_next, command, tau_dist, share * period, steps)
+        parts = [inner_next]
+        if self.odometry:
+            increments = self._encoder(phi_next) - self._encoder(phi)
+            estimate = odometry_step(
+                estimate,
+                increments,
+                wheel_radius=self.nominal_radius,
+                half_axle=self.nominal_half_axle,
+                period=period,
+            )
+            parts += [phi_next, estimate]
+        if self.measurement_periods:
+            delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
+        return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1)])
+
+    def logged(self, x: Array, u: Array) -> dict[str, Array]:
+        """The inner plant's channels under the command acting at the period's start, and, with odometry, the
+        estimate's error (estimated minus true pose) ``odom_ex``, ``odom_ey`` [m], ``odom_etheta`` [rad]."""
+        inner, _, estimate, _, _ = self.split(x)
+        logs = self.inner.logged(inner, self.stretches(x, u)[1][0][0])
+        if self.odometry:
+            error = estimate[:3] - self.inner.observe(inner)[:3]
+            logs = logs | ODOMETRY_ERROR.columns(error)
+        return logs
+
+    # --- wheels -------------------------------------------------------------------------------------------------
+
+    def _encoder(self, phi: Array) -> Array:
+        return phi if self.encoder_counts == 0 else encoder_angle(phi, self.encoder_counts)
+
+    def wheel_rates(self, inner: Array) -> Array:
+        """(phi_dot_R, phi_dot_L) [rad/s] at the inner state: the inner plant's own ``wheel_rates`` if it has them,
+        else W nu of its body with the true R and L (wheels that roll without slipping)."""
+        own = getattr(self.inner, "wheel_rates", None)
+        if own is not None:
+            return own(inner)
+        v, omega = velocity(self.inner.observe(inner))
+        return jnp.stack([v + self.true_half_axle * omega, v - self.true_half_axle * omega]) / self.true_radius
+
+    def _drive(
+        self, inner: Array, phi: Array, u: Array, tau_dist: Array, duration: Array | float, steps: int
+    ) -> tuple[Array, Array]:
+        """The inner state and the wheel angles ``duration`` [s] later under the held command ``u``."""
+        if not self.odometry:
+            return self.inner.advance(inner, u, tau_dist, duration, steps), phi
+        plant = self.inner
+        if isinstance(plant, ODEPlant) and type(plant).advance is ODEPlant.advance:
+            # an ODE plant: the wheel angles integrate with its state, in the same RK4 steps
+            size = len(inner)
+
+            def rates(z: Array) -> Array:
+                return jnp.concatenate([plant.derivative(z[:size], u, tau_dist), self.wheel_rates(z[:size])])
+
+            z = rk4(rates, jnp.concatenate([plant.hold(inner, u), phi]), duration, steps)
+            return z[:size], z[size:]
+
+        # a plant with its own integrator: its steps one at a time, the angles by the trapezoid rule over each
+        def step(_: Any, carry: tuple[Array, Array]) -> tuple[Array, Array]:
+            state, angles = carry
+            after = plant.advance(state, u, tau_dist, duration / steps, 1)
+            return after, angles + 0.5 * duration / steps * (self.wheel_rates(state) + self.wheel_rates(after))
+
+        return jax.lax.fori_loop(0, steps, step, (inner, phi))
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """The sensing chain of a scenario (``[sensing]``), before it knows its plant.
+
+    Attributes
+    ----------
+    actuation_delay
+        tau_a [s], >= 0
+    measurement_delay
+        tau_m [s], a whole number of control periods
+    encoder_counts
+        counts per wheel revolution; 0: exact angles
+    odometry
+        the controller sees the odometry estimate
+    control_period
+        T_c [s]
+    """
+
+    actuation_delay: float = 0.0
+    measurement_delay: float = 0.0
+    encoder_counts: int = 0
+    odometry: bool = False
+    control_period: float = 0.01
+
+    def wrap(self, plant: Any, nominal: Any, true: Any) -> SensedPlant:
+        """``plant`` behind this chain; ``nominal`` and ``true`` are the controller's and the plant's
+        :class:`~ddtrack.model.RobotParams` (``true`` may carry a batch axis, which the nominal values take)."""
+        whole, fraction = split_delay(self.actuation_delay, self.control_period)
+        measured, _ = split_delay(self.measurement_delay, self.control_period)
+        batch = jnp.shape(true.wheel_radius)
+        return SensedPlant(
+            plant,
+            jnp.broadcast_to(jnp.asarray(nominal.wheel_radius, dtype=float), batch),
+            jnp.broadcast_to(jnp.asarray(nominal.half_axle, dtype=float), batch),
+            true.wheel_radius,
+            true.half_axle,
+            command_periods=whole,
+            command_fraction=fraction,
+            measurement_periods=measured,
+            encoder_counts=self.encoder_counts,
+            odometry=self.odometry,
+        )
