@@ -63,7 +63,7 @@ class SensedPlant:
     measurement_periods
         the measurement delay in whole periods (static)
     encoder_counts
-        counts per wheel revolution; 0: the encoders read the exact angle (static)
+        counts per wheel revolution; 0: the encoders read the exact angle
     odometry
         the controller sees the odometry estimate instead of the true body (static)
     """
@@ -73,10 +73,10 @@ class SensedPlant:
     nominal_half_axle: Array | float
     true_radius: Array | float
     true_half_axle: Array | float
+    encoder_counts: Array | float = 0.0
     command_periods: int = static_field(default=0)
     command_fraction: float = static_field(default=0.0)
     measurement_periods: int = static_field(default=0)
-    encoder_counts: int = static_field(default=0)
     odometry: bool = static_field(default=False)
 
     # --- layouts ------------------------------------------------------------------------------------------------
@@ -116,6 +116,11 @@ class SensedPlant:
     @property
     def input_kind(self) -> str:
         return self.inner.input_kind
+
+    @property
+    def description(self) -> str:
+        """The wrapped plant's name, for messages (``SensedPlant`` alone would not say which robot it is)."""
+        return f"{getattr(self.inner, 'description', type(self.inner).__name__)} behind its [sensing] chain"
 
     def split(self, x: Array) -> tuple[Array, Array, Array, Array, Array]:
         """(inner state, wheel angles (2,), estimate (5,), command queue (q, m), measurement queue (d, 5)) of x."""
@@ -213,7 +218,9 @@ class SensedPlant:
     # --- wheels -------------------------------------------------------------------------------------------------
 
     def _encoder(self, phi: Array) -> Array:
-        return phi if self.encoder_counts == 0 else encoder_angle(phi, self.encoder_counts)
+        """The angles [rad] the encoders report (a leaf, so runs with other counts share one compilation)."""
+        counts = jnp.asarray(self.encoder_counts, dtype=float)
+        return jnp.where(counts > 0, encoder_angle(phi, jnp.where(counts > 0, counts, 1.0)), phi)
 
     def wheel_rates(self, inner: Array) -> Array:
         """(phi_dot_R, phi_dot_L) [rad/s] at the inner state: the inner plant's own ``wheel_rates`` if it has them,
@@ -280,15 +287,19 @@ class Sensing:
         whole, fraction = split_delay(self.actuation_delay, self.control_period)
         measured, _ = split_delay(self.measurement_delay, self.control_period)
         batch = jnp.shape(true.wheel_radius)
+
+        def like_batch(value: float) -> Array:
+            return jnp.broadcast_to(jnp.asarray(value, dtype=float), batch)
+
         return SensedPlant(
             plant,
-            jnp.broadcast_to(jnp.asarray(nominal.wheel_radius, dtype=float), batch),
-            jnp.broadcast_to(jnp.asarray(nominal.half_axle, dtype=float), batch),
+            like_batch(nominal.wheel_radius),
+            like_batch(nominal.half_axle),
             true.wheel_radius,
             true.half_axle,
+            like_batch(self.encoder_counts),
             command_periods=whole,
             command_fraction=fraction,
             measurement_periods=measured,
-            encoder_counts=self.encoder_counts,
             odometry=self.odometry,
         )

@@ -279,6 +279,11 @@ def require_matching_input(plant: Plant, controller: Any) -> None:
     output = getattr(controller, "output_kind", None)
     if output is not None and output != plant.input_kind:
         raise ValueError(
-            f"{type(controller).__name__} outputs {output} commands but {type(plant).__name__} takes "
+            f"{type(controller).__name__} outputs {output} commands but {_name(plant)} takes "
             f"{plant.input_kind} ({', '.join(plant.input_layout.names)}): pair a {output}-driven plant with it"
         )
+
+
+def _name(plant: Plant) -> str:
+    """The plant's class, or the wrapped plant's for a wrapper (e.g. the sensing chain) that says what it wraps."""
+    return getattr(plant, "description", type(plant).__name__)
