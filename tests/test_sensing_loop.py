@@ -18,7 +18,8 @@ from conftest import SCENARIOS
 import ddtrack
 from ddtrack._pytree import pytree_dataclass
 from ddtrack.errors import ConfigError
-from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing
+from ddtrack.layout import BODY, Layout
+from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds
 from ddtrack.scenario import build
 from ddtrack.sim import Draws, simulate
 from ddtrack.trajectories import Line
@@ -172,10 +173,30 @@ def test_odometry_on_a_plant_with_its_own_integrator_follows_the_same_wheels():
         def logged(self, x, u):
             return self.inner.logged(x, u)
 
+    @pytree_dataclass
+    class WithAngles(DynamicPlant):
+        """The paper's robot with its wheel angles as states of its own (as the example plugin's plant has)."""
+
+        state_layout: ClassVar = Layout((*BODY.names, "phi_r", "phi_l"), (*BODY.units, "rad", "rad"))
+
+        def init(self, body):
+            return jnp.concatenate([body, jnp.zeros(2)])
+
+        def observe(self, x):
+            return x[:5]
+
+        def derivative(self, x, u, d):
+            return jnp.concatenate([super().derivative(x[:5], u, d), wheel_speeds(self.params, x[3:5])])
+
     ode = run(sensed(DynamicPlant(PARAMS), odometry=True))
     own = run(sensed(OwnStepper(DynamicPlant(PARAMS)), odometry=True))
     np.testing.assert_allclose(own.plant_state["phi_r"], ode.plant_state["phi_r"], rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(own.logs["odom_ex"], ode.logs["odom_ex"], atol=1e-6)
+    angles = sensed(WithAngles(PARAMS), odometry=True)
+    assert angles.state_layout.names.count("phi_r") == 1  # odometry reads the plant's own angles
+    with_angles = run(angles)
+    np.testing.assert_allclose(with_angles.plant_state["phi_r"], ode.plant_state["phi_r"], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(with_angles.logs["odom_ex"], ode.logs["odom_ex"], rtol=1e-9, atol=1e-15)
 
 
 def test_a_sensed_plant_is_a_plant_with_named_states():

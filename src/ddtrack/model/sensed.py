@@ -87,8 +87,14 @@ class SensedPlant:
         return self.command_periods + (1 if self.command_fraction > 0.0 else 0)
 
     @property
+    def own_angles(self) -> bool:
+        """The inner plant integrates its wheel angles itself (states ``phi_r``, ``phi_l``): odometry reads those."""
+        return set(WHEEL_ANGLES.names) <= set(self.inner.state_layout.names)
+
+    @property
     def _parts(self) -> tuple[Layout, ...]:
-        odometry = (WHEEL_ANGLES, ODOMETRY) if self.odometry else (Layout((), ()), Layout((), ()))
+        none = Layout((), ())
+        odometry = (none if self.own_angles else WHEEL_ANGLES, ODOMETRY) if self.odometry else (none, none)
         return (
             self.inner.state_layout,
             *odometry,
@@ -127,6 +133,8 @@ class SensedPlant:
         sizes = [len(layout) for layout in self._parts]
         bounds = [sum(sizes[:i]) for i in range(len(sizes) + 1)]
         inner, phi, estimate, queued, delayed = (x[bounds[i] : bounds[i + 1]] for i in range(len(sizes)))
+        if self.odometry and self.own_angles:
+            phi = self._inner_angles(inner)
         return (
             inner,
             phi,
@@ -143,7 +151,7 @@ class SensedPlant:
         commanded robot: it was cruising); the measurement line full of the first measurement."""
         inner = self.inner.init(body)
         held = velocity(body) if self.input_kind == "velocity" else jnp.zeros(len(self.input_layout))
-        odometry = [jnp.zeros(2), body] if self.odometry else []
+        odometry = ([] if self.own_angles else [jnp.zeros(2)]) + [body] if self.odometry else []
         first = body if self.odometry else self.inner.observe(inner)
         queued = jnp.tile(held, self.queue_length)
         delayed = jnp.tile(first, self.measurement_periods)
@@ -192,6 +200,8 @@ class SensedPlant:
             inner_next, phi_next = self._drive(inner_next, phi_next, command, tau_dist, share * period, steps)
         parts = [inner_next]
         if self.odometry:
+            if self.own_angles:
+                phi_next = self._inner_angles(inner_next)
             increments = self._encoder(phi_next) - self._encoder(phi)
             estimate = odometry_step(
                 estimate,
@@ -200,7 +210,7 @@ class SensedPlant:
                 half_axle=self.nominal_half_axle,
                 period=period,
             )
-            parts += [phi_next, estimate]
+            parts += [estimate] if self.own_angles else [phi_next, estimate]
         if self.measurement_periods:
             delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
         return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1)])
@@ -217,17 +227,25 @@ class SensedPlant:
 
     # --- wheels -------------------------------------------------------------------------------------------------
 
+    def _inner_angles(self, inner: Array) -> Array:
+        """(phi_R, phi_L) [rad] of an inner plant that integrates them itself (:attr:`own_angles`)."""
+        return jnp.stack([inner[self.inner.state_layout.index(name)] for name in WHEEL_ANGLES.names])
+
     def _encoder(self, phi: Array) -> Array:
         """The angles [rad] the encoders report (a leaf, so runs with other counts share one compilation)."""
         counts = jnp.asarray(self.encoder_counts, dtype=float)
         return jnp.where(counts > 0, encoder_angle(phi, jnp.where(counts > 0, counts, 1.0)), phi)
 
     def wheel_rates(self, inner: Array) -> Array:
-        """(phi_dot_R, phi_dot_L) [rad/s] at the inner state: the inner plant's own ``wheel_rates`` if it has them,
-        else W nu of its body with the true R and L (wheels that roll without slipping)."""
+        """(phi_dot_R, phi_dot_L) [rad/s] at the inner state: the inner plant's own ``wheel_rates(x)`` if it has
+        them, else its states ``phidot_r``, ``phidot_l`` if it has those (a plant whose wheels slip), else W nu of its
+        body with the true R and L (wheels that roll without slipping)."""
         own = getattr(self.inner, "wheel_rates", None)
         if own is not None:
             return own(inner)
+        names = self.inner.state_layout.names
+        if "phidot_r" in names and "phidot_l" in names:
+            return jnp.stack([inner[names.index("phidot_r")], inner[names.index("phidot_l")]])
         v, omega = velocity(self.inner.observe(inner))
         return jnp.stack([v + self.true_half_axle * omega, v - self.true_half_axle * omega]) / self.true_radius
 
@@ -235,7 +253,7 @@ class SensedPlant:
         self, inner: Array, phi: Array, u: Array, tau_dist: Array, duration: Array | float, steps: int
     ) -> tuple[Array, Array]:
         """The inner state and the wheel angles ``duration`` [s] later under the held command ``u``."""
-        if not self.odometry:
+        if not self.odometry or self.own_angles:  # no angles to integrate, or the plant integrates its own
             return self.inner.advance(inner, u, tau_dist, duration, steps), phi
         plant = self.inner
         if isinstance(plant, ODEPlant) and type(plant).advance is ODEPlant.advance:
