@@ -262,11 +262,15 @@ def test_encoder_counts_without_odometry_are_refused(cli):
 @pytest.mark.slow
 def test_a_batch_and_the_environment_see_the_sensing_chain():
     from ddtrack.envs import DiffDriveTrackingEnv
-    from ddtrack.runner import monte_carlo
+    from ddtrack.runner import monte_carlo, row, run_batch
+    from ddtrack.runner import run as run_scenario
 
     scenario = ddtrack.load_scenario(BURGER, overrides=SHORT)
     rows = monte_carlo(scenario, [0, 1], chunk_size=2)
     assert all(row["status"] == "ok" and row["odom_error_max"] > 0 for row in rows)
+    alone, batch = run_scenario(scenario, seed=1), row(run_batch(scenario, [0, 1]), 1)
+    for a, b in zip(jax.tree_util.tree_leaves(alone), jax.tree_util.tree_leaves(batch), strict=True):
+        np.testing.assert_array_equal(a, b)  # a batch's row is the run alone, bit for bit
     env = DiffDriveTrackingEnv(scenario, action_mode="gains")
     env.reset(seed=0)
     assert isinstance(env._episode.plant, SensedPlant)
