@@ -213,7 +213,8 @@ def test_a_sensed_plant_is_a_plant_with_named_states():
 # --- scenarios ---------------------------------------------------------------------------------------------------
 
 BURGER = SCENARIOS / "burger_cmd_vel_figure8.toml"
-SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]"]
+#: the shipped scenario, short and on the unicycle (its motors' plant is pinned by tests/test_golden.py): compiles fast
+SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]", "plant.model=unicycle"]
 
 
 @pytest.mark.slow
