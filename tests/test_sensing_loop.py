@@ -145,6 +145,18 @@ def test_quantized_encoders_bound_the_heading_error_by_one_count_per_wheel():
     assert float(result.state[-1, 2]) > 9.0  # it turned more than a revolution and a half
 
 
+def test_an_absolute_fix_pulls_the_estimate_back_to_the_truth():
+    """With a fix every 10 periods, gain 1 and no noise, the 1 % radius error's drift restarts from 0 at each fix."""
+    nominal = RobotParams(wheel_radius=1.01 * PARAMS.wheel_radius)
+    chain = Sensing(odometry=True, control_period=T, fix_period=10 * T, fix_gain=1.0)
+    straight = OpenLoopVelocity(offset=(0.5, 0.0), swing=(0.0, 0.0))
+    ex = np.asarray(run(chain.wrap(KinematicPlant(), nominal, PARAMS), straight).logs["odom_ex"])
+    np.testing.assert_allclose(ex[::10], 0.0, atol=1e-12)
+    np.testing.assert_allclose(ex[9::10], 0.01 * 0.5 * 9 * T, rtol=1e-9)  # 9 periods of drift since the last fix
+    with pytest.raises(ValueError, match="needs odometry"):
+        Sensing(control_period=T, fix_period=10 * T).wrap(KinematicPlant(), nominal, PARAMS)
+
+
 @pytest.mark.slow
 def test_odometry_on_a_plant_with_its_own_integrator_follows_the_same_wheels():
     """A plant that brings its own ``advance`` gets its wheel angles by the trapezoid rule, step by step; on the
@@ -244,6 +256,8 @@ def test_a_run_with_odometry_scores_the_true_pose_and_records_the_estimate_error
         ("sensing.actuation_delay=60", "sensing.actuation_delay"),
         ("sensing.measurement_delay=0.07", "sensing.measurement_delay"),
         ("sensing.encoder_counts=-1", "sensing.encoder_counts"),
+        ("sensing.fix_period=0.125", "sensing.fix_period"),
+        ("sensing.fix_gain=0", "sensing.fix_gain"),
     ],
 )
 def test_bad_sensing_keys_are_refused_naming_the_field(cli, tmp_path, override, field):
@@ -254,10 +268,11 @@ def test_bad_sensing_keys_are_refused_naming_the_field(cli, tmp_path, override, 
     assert code == 2 and field in err
 
 
-def test_encoder_counts_without_odometry_are_refused(cli):
+@pytest.mark.parametrize("override", ["sensing.encoder_counts=1024", "sensing.fix_period=1"])
+def test_encoders_or_a_fix_without_odometry_are_refused(override):
     with pytest.raises(ConfigError) as refused:
-        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=["sensing.encoder_counts=1024"])
-    assert refused.value.field == "sensing.encoder_counts" and "odometry" in refused.value.suggestion
+        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[override])
+    assert refused.value.field == override.split("=")[0] and "odometry" in refused.value.suggestion
 
 
 @pytest.mark.slow
@@ -266,9 +281,11 @@ def test_a_batch_and_the_environment_see_the_sensing_chain():
     from ddtrack.runner import monte_carlo, row, run_batch
     from ddtrack.runner import run as run_scenario
 
-    scenario = ddtrack.load_scenario(BURGER, overrides=SHORT)
+    fix = ["sensing.fix_period=0.5", "sensing.fix_position_std=0.01", "sensing.fix_heading_std=0.01"]
+    scenario = ddtrack.load_scenario(BURGER, overrides=[*SHORT, *fix])
     rows = monte_carlo(scenario, [0, 1], chunk_size=2)
     assert all(row["status"] == "ok" and row["odom_error_max"] > 0 for row in rows)
+    assert rows[0]["odom_error_final"] != rows[1]["odom_error_final"]  # each seed draws its own fixes
     alone, batch = run_scenario(scenario, seed=1), row(run_batch(scenario, [0, 1]), 1)
     for a, b in zip(jax.tree_util.tree_leaves(alone), jax.tree_util.tree_leaves(batch), strict=True):
         np.testing.assert_array_equal(a, b)  # a batch's row is the run alone, bit for bit

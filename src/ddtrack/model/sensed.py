@@ -31,6 +31,8 @@ from .sensing import encoder_angle, odometry_step, split_delay
 WHEEL_ANGLES = Layout(("phi_r", "phi_l"), ("rad", "rad"))
 #: the odometry estimate, a BODY vector
 ODOMETRY = Layout(tuple(f"odom_{name}" for name in BODY.names), BODY.units)
+#: periods since the start: when the absolute fix is due, and which draw it takes
+FIX_CLOCK = Layout(("fix_clock",), ("",))
 #: estimated minus true pose, logged each period
 ODOMETRY_ERROR = Layout(("odom_ex", "odom_ey", "odom_etheta"), ("m", "m", "rad"))
 
@@ -66,6 +68,11 @@ class SensedPlant:
         counts per wheel revolution; 0: the encoders read the exact angle
     odometry
         the controller sees the odometry estimate instead of the true body (static)
+    fix_gain, fix_position_std, fix_heading_std, fix_key
+        the absolute fix's blend weight in (0, 1], its noise on x and y [m] and on theta [rad], and the PRNG key
+        its noise is drawn from (per period, folded in by the period's index)
+    fix_periods
+        an absolute fix every this many periods; 0: none (static)
     """
 
     inner: Any
@@ -74,10 +81,15 @@ class SensedPlant:
     true_radius: Array | float
     true_half_axle: Array | float
     encoder_counts: Array | float = 0.0
+    fix_gain: Array | float = 0.0
+    fix_position_std: Array | float = 0.0
+    fix_heading_std: Array | float = 0.0
+    fix_key: Array | None = None
     command_periods: int = static_field(default=0)
     command_fraction: float = static_field(default=0.0)
     measurement_periods: int = static_field(default=0)
     odometry: bool = static_field(default=False)
+    fix_periods: int = static_field(default=0)
 
     # --- layouts ------------------------------------------------------------------------------------------------
 
@@ -100,6 +112,7 @@ class SensedPlant:
             *odometry,
             _queue_layout("queued", self.inner.input_layout, self.queue_length),
             _queue_layout("delayed", BODY, self.measurement_periods),
+            FIX_CLOCK if self.fix_periods else none,
         )
 
     @property
@@ -132,7 +145,7 @@ class SensedPlant:
         """(inner state, wheel angles (2,), estimate (5,), command queue (q, m), measurement queue (d, 5)) of x."""
         sizes = [len(layout) for layout in self._parts]
         bounds = [sum(sizes[:i]) for i in range(len(sizes) + 1)]
-        inner, phi, estimate, queued, delayed = (x[bounds[i] : bounds[i + 1]] for i in range(len(sizes)))
+        inner, phi, estimate, queued, delayed = (x[bounds[i] : bounds[i + 1]] for i in range(5))
         if self.odometry and self.own_angles:
             phi = self._inner_angles(inner)
         return (
@@ -155,7 +168,8 @@ class SensedPlant:
         first = body if self.odometry else self.inner.observe(inner)
         queued = jnp.tile(held, self.queue_length)
         delayed = jnp.tile(first, self.measurement_periods)
-        return jnp.concatenate([inner, *odometry, queued, delayed])
+        clock = jnp.zeros(1 if self.fix_periods else 0)  # periods since the start, for the fix's schedule and draws
+        return jnp.concatenate([inner, *odometry, queued, delayed, clock])
 
     def saturate(self, u: Array) -> Array:
         return self.inner.saturate(u)
@@ -210,10 +224,24 @@ class SensedPlant:
                 half_axle=self.nominal_half_axle,
                 period=period,
             )
+            if self.fix_periods:
+                estimate = self.fixed(estimate, self.inner.observe(inner_next), x[-1] + 1.0)
             parts += [estimate] if self.own_angles else [phi_next, estimate]
         if self.measurement_periods:
             delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
-        return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1)])
+        tail = [x[-1:] + 1.0] if self.fix_periods else []
+        return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1), *tail])
+
+    def fixed(self, estimate: Array, body: Array, clock: Array) -> Array:
+        """The estimate after the absolute fix of period ``clock`` (a localisation of the true ``body``, noise
+        added), blended in with ``fix_gain`` when the period is due: pose + g (fix - pose), the heading gap wrapped."""
+        assert self.fix_key is not None, "a fix needs its key (Sensing.wrap gives it)"
+        xi = jax.random.normal(jax.random.fold_in(self.fix_key, clock.astype(jnp.int32)), (3,))
+        noise = jnp.stack([self.fix_position_std * xi[0], self.fix_position_std * xi[1], self.fix_heading_std * xi[2]])
+        gap = body[:3] + noise - estimate[:3]
+        gap = gap.at[2].set(jnp.arctan2(jnp.sin(gap[2]), jnp.cos(gap[2])))  # the short way round
+        due = jnp.mod(clock, self.fix_periods) == 0
+        return estimate.at[:3].add(jnp.where(due, self.fix_gain, 0.0) * gap)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """The inner plant's channels under the command acting at the period's start, and, with odometry, the
@@ -291,6 +319,9 @@ class Sensing:
         the controller sees the odometry estimate
     control_period
         T_c [s]
+    fix_period, fix_gain, fix_position_std, fix_heading_std
+        an absolute fix every ``fix_period`` [s] (a whole number of periods; 0: none), blended in with weight
+        ``fix_gain``, with noise of these standard deviations [m], [rad]
     """
 
     actuation_delay: float = 0.0
@@ -298,13 +329,23 @@ class Sensing:
     encoder_counts: int = 0
     odometry: bool = False
     control_period: float = 0.01
+    fix_period: float = 0.0
+    fix_gain: float = 0.5
+    fix_position_std: float = 0.0
+    fix_heading_std: float = 0.0
 
-    def wrap(self, plant: Any, nominal: Any, true: Any) -> SensedPlant:
+    def wrap(self, plant: Any, nominal: Any, true: Any, key: Array | None = None) -> SensedPlant:
         """``plant`` behind this chain; ``nominal`` and ``true`` are the controller's and the plant's
-        :class:`~ddtrack.model.RobotParams` (``true`` may carry a batch axis, which the nominal values take)."""
+        :class:`~ddtrack.model.RobotParams` (``true`` may carry a batch axis, which the nominal values take);
+        ``key``, the PRNG key of the absolute fix's noise (default a fixed one), with that batch axis too."""
         whole, fraction = split_delay(self.actuation_delay, self.control_period)
         measured, _ = split_delay(self.measurement_delay, self.control_period)
+        fixes, _ = split_delay(self.fix_period, self.control_period)
+        if fixes and not self.odometry:
+            raise ValueError("an absolute fix corrects the odometry estimate: it needs odometry")
         batch = jnp.shape(true.wheel_radius)
+        if fixes and key is None:
+            key = jnp.broadcast_to(jax.random.PRNGKey(0), (*batch, 2))
 
         def like_batch(value: float) -> Array:
             return jnp.broadcast_to(jnp.asarray(value, dtype=float), batch)
@@ -316,8 +357,13 @@ class Sensing:
             true.wheel_radius,
             true.half_axle,
             like_batch(self.encoder_counts),
+            like_batch(self.fix_gain),
+            like_batch(self.fix_position_std),
+            like_batch(self.fix_heading_std),
+            key if fixes else None,
             command_periods=whole,
             command_fraction=fraction,
             measurement_periods=measured,
             odometry=self.odometry,
+            fix_periods=fixes,
         )

@@ -35,6 +35,7 @@ class Setup:
     kinematic: bool = False  #: the controller outputs velocity commands (v, omega) to a torque-driven robot
     plant_model: Callable[[RobotParams], Plant] = DynamicPlant  #: the true robot's plant from its parameters
     sensing: Sensing | None = None  #: latency, encoders and odometry between robot and controller (None: none)
+    sensing_key: Any = None  #: the PRNG key of the absolute fix's noise (the run's noise stream; None: a fixed key)
 
     def __post_init__(self) -> None:
         try:  # a wrong pairing is named here, before anything is simulated
@@ -57,7 +58,7 @@ class Setup:
         when the chain is off."""
         if self.sensing is None:
             return plant
-        return self.sensing.wrap(plant, self.nominal, self.plant_params)  # type: ignore[return-value]
+        return self.sensing.wrap(plant, self.nominal, self.plant_params, self.sensing_key)  # type: ignore[return-value]
 
 
 def build(

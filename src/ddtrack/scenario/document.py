@@ -85,13 +85,15 @@ class Scenario(_Section):
                     f"{delay:g} s is not shorter than the run ({sim.duration:g} s): {what} would arrive in time",
                     "shorten the delay or lengthen simulation.duration",
                 )
-        periods = sensing.measurement_delay / sim.control_period
-        if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
-            raise FieldError(
-                "sensing.measurement_delay",
-                f"{sensing.measurement_delay:g} s is not a whole number of control periods ({sim.control_period:g} s)",
-                f"use a multiple of simulation.control_period, e.g. {round(periods) * sim.control_period:g}",
-            )
+        for field in ("measurement_delay", "fix_period"):
+            value, period = getattr(sensing, field), sim.control_period
+            periods = value / period
+            if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
+                raise FieldError(
+                    f"sensing.{field}",
+                    f"{value:g} s is not a whole number of control periods ({period:g} s)",
+                    f"use a multiple of simulation.control_period, e.g. {max(1, round(periods)) * period:g}",
+                )
         return self
 
     def divergence_distance(self) -> float:

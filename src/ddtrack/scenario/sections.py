@@ -333,21 +333,46 @@ class SensingConfig(_Section):
         ),
     )
 
+    fix_period: NonNegative = Field(
+        0.0,
+        le=3600.0,
+        description=(
+            "An absolute fix (localisation) every fix_period [s], a whole number of control periods, corrects the "
+            "odometry estimate; 0: none. Needs odometry = true."
+        ),
+    )
+    fix_gain: float = Field(
+        0.5, gt=0.0, le=1.0, description="Weight g of the fix in the blend pose + g (fix - pose); 1: reset to it."
+    )
+    fix_position_std: NonNegative = Field(0.0, description="Noise of the fix on x and y [m].")
+    fix_heading_std: NonNegative = Field(0.0, description="Noise of the fix on theta [rad].")
+
     @model_validator(mode="after")
     def _encoders_feed_odometry(self) -> SensingConfig:
-        if self.encoder_counts and not self.odometry:
-            raise FieldError(
-                "encoder_counts",
-                "encoders feed odometry, and odometry is off: the counts would change nothing",
-                "set sensing.odometry = true, or leave encoder_counts out",
-            )
+        for field, what in (("encoder_counts", "encoders feed"), ("fix_period", "an absolute fix corrects")):
+            if getattr(self, field) and not self.odometry:
+                raise FieldError(
+                    field,
+                    f"{what} odometry, and odometry is off: {field} would change nothing",
+                    f"set sensing.odometry = true, or leave {field} out",
+                )
         return self
 
     def build(self, control_period: float) -> Sensing | None:
         """The runtime chain at ``control_period`` [s], or None when everything is off (the plant as it is)."""
         if not (self.actuation_delay or self.measurement_delay or self.odometry):
             return None
-        return Sensing(self.actuation_delay, self.measurement_delay, self.encoder_counts, self.odometry, control_period)
+        return Sensing(
+            self.actuation_delay,
+            self.measurement_delay,
+            self.encoder_counts,
+            self.odometry,
+            control_period,
+            self.fix_period,
+            self.fix_gain,
+            self.fix_position_std,
+            self.fix_heading_std,
+        )
 
 
 # --- [initial] -------------------------------------------------------------------------------
