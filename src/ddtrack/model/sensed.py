@@ -4,12 +4,16 @@ The wrapper is itself a plant (``init``/``saturate``/``advance``/``observe``/``l
 and the Gymnasium environment step it like any other. Its state is the inner plant's, then what the sensing chain
 carries from one period to the next::
 
-    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed measurements]
+    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed readings | fix_clock]
+
+(each part only when its feature is on; the wheel angles also not when the inner plant has its own ``phi_r``,
+``phi_l``).
 
 ``observe(x)`` stays the inner plant's, the **true** body, which the simulator records and the metrics read.
 ``measure(x)`` is what the controller's sensors report: the odometry estimate (or the true body without odometry),
 as it was ``measurement_periods`` periods ago. The queues are internal: ``recorded_layout`` names the states a run
 records (the inner plant's, the wheel angles and the estimate), so a long delay does not flood the time series.
+An optional absolute fix blends a noisy true pose into the estimate every ``fix_periods`` periods.
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ def _join(*layouts: Layout) -> Layout:
 
 @pytree_dataclass
 class SensedPlant:
-    """``inner`` with an actuation delay, a measurement delay, encoders and odometry (model.md §1.9).
+    """``inner`` with an actuation delay, a measurement delay, encoders, odometry and an absolute fix (model.md §1.9).
 
     Attributes
     ----------
