@@ -258,6 +258,7 @@ def test_a_run_with_odometry_scores_the_true_pose_and_records_the_estimate_error
         ("sensing.encoder_counts=-1", "sensing.encoder_counts"),
         ("sensing.fix_period=0.125", "sensing.fix_period"),
         ("sensing.fix_gain=0", "sensing.fix_gain"),
+        ("sensing.measurement_delay=50.05", "sensing.measurement_delay"),  # 1001 periods: over the limit
     ],
 )
 def test_bad_sensing_keys_are_refused_naming_the_field(cli, tmp_path, override, field):

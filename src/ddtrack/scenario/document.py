@@ -26,6 +26,8 @@ from .sections import (
     SimulationConfig,
 )
 
+MAX_DELAY_PERIODS = 1000  #: the longest [sensing] delay in control periods (its queue is part of the plant's state)
+
 # --- the scenario --------------------------------------------------------------------------------
 
 
@@ -84,6 +86,13 @@ class Scenario(_Section):
                     f"sensing.{field}",
                     f"{delay:g} s is not shorter than the run ({sim.duration:g} s): {what} would arrive in time",
                     "shorten the delay or lengthen simulation.duration",
+                )
+            if delay / sim.control_period > MAX_DELAY_PERIODS:  # the queue is part of the state vector
+                raise FieldError(
+                    f"sensing.{field}",
+                    f"{delay:g} s is {delay / sim.control_period:.3g} control periods, over the limit of "
+                    f"{MAX_DELAY_PERIODS}",
+                    "shorten the delay or lengthen simulation.control_period",
                 )
         for field in ("measurement_delay", "fix_period"):
             value, period = getattr(sensing, field), sim.control_period
