@@ -39,9 +39,9 @@ def case_metrics(path: Path, controller: str | None) -> dict:
         overrides = [*SHORT, *(SHORT_IDENTIFICATION if controller == "nn_adaptive_backstepping" else [])]
     try:
         scenario = ddtrack.load_scenario(path, overrides=overrides, controller=controller)
+        setup, draws = prepare(scenario, seed=0)  # refuses a controller whose commands the plant does not take
     except ConfigError as refused:
         return {"refused": str(refused)}
-    setup, draws = prepare(scenario, seed=0)
     return run_record(scenario, setup, run_setup(scenario, setup, draws))[1]
 
 

@@ -233,6 +233,7 @@ def test_scenario_reference_documents_every_key():
         NoiseConfig,
         ParameterDraw,
         RobotConfig,
+        SensingConfig,
         SimulationConfig,
     )
 
@@ -242,6 +243,7 @@ def test_scenario_reference_documents_every_key():
         RobotConfig,
         ParameterDraw,
         NoiseConfig,
+        SensingConfig,
         InitialConfig,
         *TRAJECTORIES.values(),
         *DISTURBANCES.values(),

@@ -257,7 +257,8 @@ def summarize(
         (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run; ``warnings``
         (always present, [] when there are none); where the run has ``mu_required`` (a torque-driven plant):
         ``mu_required_max`` (the friction coefficient the run needed), ``time_above_floor_mu`` [s] and
-        ``wheel_speed_max`` [rad/s], over the whole run.
+        ``wheel_speed_max`` [rad/s], over the whole run; where the controller sees odometry (``odom_ex`` in the
+        columns): :func:`odometry_error`'s, over the whole run.
     """
     metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
     keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
@@ -275,11 +276,25 @@ def summarize(
             metrics["mu_required_max"] = float(np.max(mu))
             metrics["time_above_floor_mu"] = float(np.count_nonzero(mu > floor_friction) * control_period)
             metrics["wheel_speed_max"] = float(np.max(np.abs([columns["wheel_speed_r"], columns["wheel_speed_l"]])))
+        if "odom_ex" in columns and len(columns["odom_ex"]):
+            metrics |= odometry_error(columns["odom_ex"], columns["odom_ey"], columns["odom_etheta"])
     if all(k in columns for k in ("kx", "ky", "ktheta")) and len(columns["t"]):
         gains = [float(columns[k][-1]) for k in ("kx", "ky", "ktheta")]
         metrics["final_gains"] = gains if all(map(math.isfinite, gains)) else None
     metrics["warnings"] = [dict(w) for w in warnings]
     return metrics
+
+
+def odometry_error(e_x: np.ndarray, e_y: np.ndarray, e_theta: np.ndarray) -> dict[str, float]:
+    """How far the odometry estimate strayed from the true pose (estimated minus true, per period): the position
+    error |(e_x, e_y)| at the end and at its largest, ``odom_error_final``, ``odom_error_max`` [m], and the largest
+    heading error ``odom_heading_error_max`` [rad]."""
+    position = np.hypot(e_x, e_y)
+    return {
+        "odom_error_final": float(position[-1]),
+        "odom_error_max": float(np.max(position)),
+        "odom_heading_error_max": float(np.max(np.abs(e_theta))),
+    }
 
 
 def warning_counts(runs: list[dict]) -> dict[str, int]:

@@ -26,6 +26,7 @@ from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
+from .model.sensed import ODOMETRY_ERROR
 from .plausibility import motor_metrics, motor_warnings, scenario_motor, traction_columns, traction_warnings
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
@@ -136,6 +137,8 @@ def prepare(
     seed = scenario.simulation.seed if seed is None else seed
     keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, scenario.simulation.n_steps)
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
+    if setup.sensing is not None and setup.sensing.fix_period:  # the fix's noise: a key of its own off the noise stream
+        setup = dataclasses.replace(setup, sensing_key=jax.random.fold_in(keys["noise"], 1))
     if identify and needs_identification(scenario):
         setup = with_identification(scenario, setup, k_identify, identification)
     return setup, Draws(disturbance=disturbance, noise=noise, controller_key=k_run)
@@ -207,7 +210,7 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
     """:func:`prepare` for many seeds, stacked along a leading batch axis; NN emulators are identified
     for all the runs at once (``vmap``)."""
     pairs = [prepare(scenario, seed=seed, identify=False) for seed in seeds]
-    fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise")
+    fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise", "sensing_key")
     setup = dataclasses.replace(pairs[0][0], **{f: stack([getattr(p[0], f) for p in pairs]) for f in fields})
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
@@ -288,7 +291,8 @@ def _steps(scenario: Scenario) -> dict:
     }
 
 
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate")  #: the series metrics and warnings read
+#: the series metrics and warnings read
+METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", *ODOMETRY_ERROR.names)
 
 
 def run_warnings(

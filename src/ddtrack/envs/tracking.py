@@ -95,7 +95,7 @@ from ..scenario import (
     load_scenario,
 )
 from ..shipped import scenario_path
-from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws
+from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws, measured
 
 ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
@@ -150,7 +150,7 @@ def _observe(episode: _Episode, x: Array, k: Array, gains: Array | None) -> tupl
     """Observation at period k of state x (measured with draw k), and the true error's cost J and e_tr."""
     ref = episode.trajectory(k * episode.control_period)
     body = episode.plant.observe(x)
-    y = episode.noise.measure(body, episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
+    y = episode.noise.measure(measured(episode.plant, x), episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
     e = posture_error(*pose(y), ref.x, ref.y, ref.theta)
     parts = [e[0], e[1], jnp.sin(e[2]), jnp.cos(e[2]), *velocity(y), ref.v, ref.omega]
     observation = jnp.stack(parts if gains is None else [*parts, *gains])
@@ -165,7 +165,7 @@ def _start(episode: _Episode, body0: Array, key: Array, *, gains_mode: bool) -> 
     """The plant's initial state and the controller's memory (as ``simulate`` initialises them) from the BODY state
     ``body0``, and the packed first observation."""
     x0 = episode.plant.init(jnp.asarray(body0, dtype=float))
-    memory = episode.controller.init(episode.plant.observe(x0), episode.trajectory(0.0), key) if gains_mode else ()
+    memory = episode.controller.init(measured(episode.plant, x0), episode.trajectory(0.0), key) if gains_mode else ()
     observation, _, e_tr = _observe(episode, x0, jnp.asarray(0), episode.gain_anchor if gains_mode else None)
     return x0, memory, jnp.concatenate([observation, jnp.stack([e_tr])])
 
@@ -335,7 +335,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         setup, draws = prepare(self.scenario, seed=seed, identify=False)  # no gain law here needs an emulator
         if self.plant_model is not None:
             setup = dataclasses.replace(setup, plant_model=self.plant_model)
-        plant = setup.plant if self._gains_mode else setup.plant_model(setup.plant_params)
+        plant = setup.plant if self._gains_mode else setup.sensed(setup.plant_model(setup.plant_params))
         x0 = jnp.asarray(setup.x0, dtype=float)
         if pose is not None:
             x0 = x0.at[:3].set(jnp.asarray(pose, dtype=float))

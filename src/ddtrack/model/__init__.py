@@ -37,6 +37,7 @@ from .motors import (
 )
 from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
+from .sensed import SensedPlant, Sensing
 from .slip import SlipPlant, slip_plant, slip_plant_model
 
 __all__ = [
@@ -50,6 +51,8 @@ __all__ = [
     "ODEPlant",
     "Plant",
     "RobotParams",
+    "SensedPlant",
+    "Sensing",
     "SlipPlant",
     "TorqueDrivenPlant",
     "VelocityDrivenPlant",

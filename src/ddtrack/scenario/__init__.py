@@ -69,6 +69,7 @@ from .sections import ParameterDraw as ParameterDraw
 from .sections import PlantConfig as PlantConfig
 from .sections import RandomizeConfig as RandomizeConfig
 from .sections import RobotConfig as RobotConfig
+from .sections import SensingConfig as SensingConfig
 from .sections import SimulationConfig as SimulationConfig
 from .sections import SinusoidDisturbance as SinusoidDisturbance
 from .trajectory_configs import CircleTrajectory as CircleTrajectory

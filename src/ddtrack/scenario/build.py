@@ -11,7 +11,7 @@ import jax.numpy as jnp
 
 from ..controllers import Controller
 from ..errors import ConfigError
-from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
+from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, Sensing, WheelDisturbance
 from ..sim import require_matching_input
 from ..trajectories import Trajectory
 from .document import Scenario
@@ -34,6 +34,8 @@ class Setup:
     identification: Any = None  #: the emulator's identification, for controllers that have one
     kinematic: bool = False  #: the controller outputs velocity commands (v, omega) to a torque-driven robot
     plant_model: Callable[[RobotParams], Plant] = DynamicPlant  #: the true robot's plant from its parameters
+    sensing: Sensing | None = None  #: latency, encoders and odometry between robot and controller (None: none)
+    sensing_key: Any = None  #: the PRNG key of the absolute fix's noise (the run's noise stream; None: a fixed key)
 
     def __post_init__(self) -> None:
         try:  # a wrong pairing is named here, before anything is simulated
@@ -48,8 +50,15 @@ class Setup:
         applies (v, omega) at once (then [plant], [randomize] and [disturbance] have no effect)."""
         robot = self.plant_model(self.plant_params)
         if self.kinematic and robot.input_kind != "velocity":
-            return KinematicPlant()
-        return robot
+            return self.sensed(KinematicPlant())
+        return self.sensed(robot)
+
+    def sensed(self, plant: Plant) -> Plant:
+        """``plant`` behind the scenario's ``[sensing]`` chain (:class:`~ddtrack.model.SensedPlant`), or as it is
+        when the chain is off."""
+        if self.sensing is None:
+            return plant
+        return self.sensing.wrap(plant, self.nominal, self.plant_params, self.sensing_key)  # type: ignore[return-value]
 
 
 def build(
@@ -90,6 +99,7 @@ def build(
         # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
         kinematic=kind.output == "velocity" and scenario.plant.model == "dynamic",
         plant_model=plant_kind(scenario.plant.model).model(scenario),
+        sensing=scenario.sensing.build(sim.control_period),
     )
 
 

@@ -22,8 +22,11 @@ from .sections import (
     PlantConfig,
     RandomizeConfig,
     RobotConfig,
+    SensingConfig,
     SimulationConfig,
 )
+
+MAX_DELAY_PERIODS = 1000  #: the longest [sensing] delay in control periods (its queue is part of the plant's state)
 
 # --- the scenario --------------------------------------------------------------------------------
 
@@ -39,10 +42,10 @@ class Scenario(_Section):
         Name of the scenario; the default run folder is ``runs/NAME``.
     description : str
         Free text.
-    simulation, robot, plant, randomize, disturbance, noise, trajectory, initial, controller
+    simulation, robot, plant, randomize, disturbance, noise, sensing, trajectory, initial, controller
         The file's sections: the run's timing and seed, the nominal robot the controller believes in, the true
-        plant, its random draws, the wheel-torque disturbance, the measurement noise, the reference, the
-        initial state and the controller.
+        plant, its random draws, the wheel-torque disturbance, the measurement noise, the latency, encoders and
+        odometry, the reference, the initial state and the controller.
     """
 
     name: str = Field(min_length=1, max_length=200, description="Name of the scenario.")
@@ -53,6 +56,7 @@ class Scenario(_Section):
     randomize: RandomizeConfig = RandomizeConfig()
     disturbance: DisturbanceConfig = NoDisturbance()
     noise: NoiseConfig = NoiseConfig()
+    sensing: SensingConfig = SensingConfig()
     trajectory: Annotated[TrajectoryConfig, TrajectoryField()]
     initial: InitialConfig = InitialConfig()
     controller: Annotated[ControllerConfig, ControllerField()] = BacksteppingConfig(kind="backstepping")
@@ -69,6 +73,35 @@ class Scenario(_Section):
             if low <= 0.0 if must_be_positive else low < 0.0:
                 raise FieldError(
                     f"randomize.{field}", f"can draw a non-physical value ({low:.3g}); use a smaller spread"
+                )
+        return self
+
+    @model_validator(mode="after")
+    def _delays_fit_the_run(self) -> Scenario:
+        sensing, sim = self.sensing, self.simulation
+        for field, what in (("actuation_delay", "no command"), ("measurement_delay", "no measurement")):
+            delay = getattr(sensing, field)
+            if delay >= sim.duration:
+                raise FieldError(
+                    f"sensing.{field}",
+                    f"{delay:g} s is not shorter than the run ({sim.duration:g} s): {what} would arrive in time",
+                    "shorten the delay or lengthen simulation.duration",
+                )
+            if delay / sim.control_period > MAX_DELAY_PERIODS:  # the queue is part of the state vector
+                raise FieldError(
+                    f"sensing.{field}",
+                    f"{delay:g} s is {delay / sim.control_period:.3g} control periods, over the limit of "
+                    f"{MAX_DELAY_PERIODS}",
+                    "shorten the delay or lengthen simulation.control_period",
+                )
+        for field in ("measurement_delay", "fix_period"):
+            value, period = getattr(sensing, field), sim.control_period
+            periods = value / period
+            if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
+                raise FieldError(
+                    f"sensing.{field}",
+                    f"{value:g} s is not a whole number of control periods ({period:g} s)",
+                    f"use a multiple of simulation.control_period, e.g. {max(1, round(periods)) * period:g}",
                 )
         return self
 

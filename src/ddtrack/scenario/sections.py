@@ -1,5 +1,5 @@
 """The scenario's plain sections: ``[simulation]``, ``[robot]``, ``[plant]``, ``[randomize]``, ``[disturbance]``,
-``[noise]`` and ``[initial]``.
+``[noise]``, ``[sensing]`` and ``[initial]``.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, model_validator
 
 from ..errors import ConfigError, did_you_mean
-from ..model import MeasurementNoise, RobotParams, WheelDisturbance
+from ..model import MeasurementNoise, RobotParams, Sensing, WheelDisturbance
 from ._base import (
     MAX_CONTROL_PERIODS,
     MAX_SEED,
@@ -308,6 +308,88 @@ class NoiseConfig(_Section):
     def build(self) -> MeasurementNoise:
         p, h = self.position_std, self.heading_std
         return MeasurementNoise(std=(p, p, h, self.velocity_std, self.yaw_rate_std))
+
+
+# --- [sensing] -------------------------------------------------------------------------------
+
+
+class SensingConfig(_Section):
+    """Latency, wheel encoders and odometry between the robot and its controller (model.md §1.9); all off by
+    default. Metrics stay against the true pose."""
+
+    actuation_delay: NonNegative = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "tau_a [s]: the command computed at t_k acts from t_k + tau_a until the next one acts; a fraction of a "
+            "control period splits the period between two commands."
+        ),
+    )
+    measurement_delay: NonNegative = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "tau_m [s], a whole number of control periods: the controller at t_k sees what its sensors read at "
+            "t_k - tau_m."
+        ),
+    )
+    encoder_counts: int = Field(
+        0,
+        ge=0,
+        le=10_000_000,
+        description=(
+            "Counts per wheel revolution of the encoders odometry reads, e.g. 4096 for a TurtleBot3's XL430; "
+            "0: exact wheel angles. Needs odometry = true."
+        ),
+    )
+    odometry: bool = Field(
+        False,
+        description=(
+            "The controller sees the odometry estimate (encoder increments integrated with the [robot] wheel_radius "
+            "and half_axle, whatever [plant] says) instead of the true pose and velocity."
+        ),
+    )
+
+    fix_period: NonNegative = Field(
+        0.0,
+        le=3600.0,
+        description=(
+            "An absolute fix (localisation) every fix_period [s], a whole number of control periods, corrects the "
+            "odometry estimate; 0: none. Needs odometry = true."
+        ),
+    )
+    fix_gain: float = Field(
+        0.5, gt=0.0, le=1.0, description="Weight g of the fix in the blend pose + g (fix - pose); 1: reset to it."
+    )
+    fix_position_std: NonNegative = Field(0.0, description="Noise of the fix on x and y [m].")
+    fix_heading_std: NonNegative = Field(0.0, description="Noise of the fix on theta [rad].")
+
+    @model_validator(mode="after")
+    def _encoders_feed_odometry(self) -> SensingConfig:
+        for field, what in (("encoder_counts", "encoders feed"), ("fix_period", "an absolute fix corrects")):
+            if getattr(self, field) and not self.odometry:
+                raise FieldError(
+                    field,
+                    f"{what} odometry, and odometry is off: {field} would change nothing",
+                    f"set sensing.odometry = true, or leave {field} out",
+                )
+        return self
+
+    def build(self, control_period: float) -> Sensing | None:
+        """The runtime chain at ``control_period`` [s], or None when everything is off (the plant as it is)."""
+        if not (self.actuation_delay or self.measurement_delay or self.odometry):
+            return None
+        return Sensing(
+            self.actuation_delay,
+            self.measurement_delay,
+            self.encoder_counts,
+            self.odometry,
+            control_period,
+            self.fix_period,
+            self.fix_gain,
+            self.fix_position_std,
+            self.fix_heading_std,
+        )
 
 
 # --- [initial] -------------------------------------------------------------------------------

@@ -11,7 +11,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
 from ..geometry import posture_error
-from ..layout import BODY, WHEEL_TORQUES, pose, velocity
+from ..layout import BODY, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..precision import require_float64
 from ..trajectories import Trajectory
@@ -141,7 +141,7 @@ class ClosedLoop:
         t = k * self.control_period
         ref = self.trajectory(t)
         body = self.plant.observe(x)
-        y = self.noise.measure(body, xi_noise)
+        y = self.noise.measure(measured(self.plant, x), xi_noise)
         u, next_memory, logs = self.controller.step(t, y, ref, memory)
         u, x_next = plant_period(
             self.plant,
@@ -190,15 +190,15 @@ def simulate(
         x_0 = plant.init(x0)
         for k in 0 .. N-1:                      t_k = k * T_c
             ref_k      = trajectory(t_k)
-            b_k        = plant.observe(x_k)              the BODY vector [x, y, theta, v, omega]
-            y_k        = b_k + noise_std * xi_k          what the controller sees
+            b_k        = plant.observe(x_k)              the true BODY vector [x, y, theta, v, omega]
+            y_k        = plant.measure(x_k) + noise_std * xi_k    what the controller sees (b_k without ``measure``)
             u_k, m     = controller.step(t_k, y_k, ref_k, m)
             u_k, x_{k+1} = plant_period(plant, x_k, u_k, t_k, draw_k):
                 u_k      = plant.saturate(u_k)
                 d_k      = disturbance(t_k, draw_k)
                 x_{k+1}  = plant.advance(x_k, u_k, d_k, T_c, substeps)
             status_k   = period_status(b_k, x_{k+1}, u_k, e_p(b_k, ref_k))
-            record b_k, ref_k, e_p(b_k, ref_k), u_k, logs_k | plant.logged(x_k, u_k), the other states of x_k
+            record b_k, ref_k, e_p(b_k, ref_k), u_k, logs_k | plant.logged(x_k, u_k), the other recorded states of x_k
 
     Failure is a status, never an exception: the first k with a non-finite control or next state
     sets ``non_finite``; the first k whose tracking error exceeds ``divergence_error`` [m], or whose
@@ -235,7 +235,7 @@ def simulate(
     require_float64()
     require_matching_input(plant, controller)
     x0 = plant.init(jnp.asarray(x0, dtype=float))
-    memory0 = controller.init(plant.observe(x0), trajectory(0.0), draws.controller_key)
+    memory0 = controller.init(measured(plant, x0), trajectory(0.0), draws.controller_key)
 
     loop = ClosedLoop(
         plant, controller, trajectory, disturbance, noise, control_period, divergence_error, divergence_speed, substeps
@@ -249,7 +249,7 @@ def simulate(
         )
         failure_index = jnp.where((status == 0) & (new_status != 0), k, failure_index)
         channels = logs | plant.logged(x, u)  # e.g. the torques a torque-driven plant applied
-        extra = {name: x[i] for i, name in enumerate(plant.state_layout.names) if name not in BODY.names}
+        extra = {name: x[plant.state_layout.index(name)] for name in recorded(plant).names if name not in BODY.names}
         record = (body, ref, error, u, {name: jnp.asarray(value, float) for name, value in channels.items()}, extra)
         return (x_next, next_memory, new_status, failure_index), record
 
@@ -262,11 +262,28 @@ def simulate(
     return SimResult(steps * control_period, states, refs, errors, controls, logs, status, failure_index, extra)
 
 
+def measured(plant: Plant, x: Array) -> Array:
+    """What the controller's sensors report at x, a BODY vector before noise: ``plant.measure(x)`` where the plant
+    has one (odometry, a delayed measurement: ``ddtrack.model.SensedPlant``), else the true ``plant.observe(x)``."""
+    return getattr(plant, "measure", plant.observe)(x)
+
+
+def recorded(plant: Plant) -> Layout:
+    """The states a run records: ``plant.recorded_layout`` where the plant declares one (leaving out internal buffers
+    such as a command queue), else its whole ``state_layout``."""
+    return getattr(plant, "recorded_layout", plant.state_layout)
+
+
 def require_matching_input(plant: Plant, controller: Any) -> None:
     """A ValueError naming both sides when ``controller`` declares an ``output_kind`` that ``plant`` does not take."""
     output = getattr(controller, "output_kind", None)
     if output is not None and output != plant.input_kind:
         raise ValueError(
-            f"{type(controller).__name__} outputs {output} commands but {type(plant).__name__} takes "
+            f"{type(controller).__name__} outputs {output} commands but {_name(plant)} takes "
             f"{plant.input_kind} ({', '.join(plant.input_layout.names)}): pair a {output}-driven plant with it"
         )
+
+
+def _name(plant: Plant) -> str:
+    """The plant's class, or the wrapped plant's for a wrapper (e.g. the sensing chain) that says what it wraps."""
+    return getattr(plant, "description", type(plant).__name__)

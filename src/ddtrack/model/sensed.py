@@ -1,0 +1,373 @@
+"""Any plant seen through latency, wheel encoders and odometry (model.md §1.9): :class:`SensedPlant`.
+
+The wrapper is itself a plant (``init``/``saturate``/``advance``/``observe``/``logged``), so the simulator, a batch
+and the Gymnasium environment step it like any other. Its state is the inner plant's, then what the sensing chain
+carries from one period to the next::
+
+    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed readings | fix_clock]
+
+(each part only when its feature is on; the wheel angles also not when the inner plant has its own ``phi_r``,
+``phi_l``).
+
+``observe(x)`` stays the inner plant's, the **true** body, which the simulator records and the metrics read.
+``measure(x)`` is what the controller's sensors report: the odometry estimate (or the true body without odometry),
+as it was ``measurement_periods`` periods ago. The queues are internal: ``recorded_layout`` names the states a run
+records (the inner plant's, the wheel angles and the estimate), so a long delay does not flood the time series.
+An optional absolute fix blends a noisy true pose into the estimate every ``fix_periods`` periods.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from .._pytree import pytree_dataclass, static_field
+from ..integrators import rk4
+from ..layout import BODY, Layout, velocity
+from .plants import ODEPlant
+from .sensing import encoder_angle, odometry_step, split_delay
+
+#: the wheel angles a plant with encoders integrates [rad]
+WHEEL_ANGLES = Layout(("phi_r", "phi_l"), ("rad", "rad"))
+#: the odometry estimate, a BODY vector
+ODOMETRY = Layout(tuple(f"odom_{name}" for name in BODY.names), BODY.units)
+#: periods since the start: when the absolute fix is due, and which draw it takes
+FIX_CLOCK = Layout(("fix_clock",), ("",))
+#: estimated minus true pose, logged each period
+ODOMETRY_ERROR = Layout(("odom_ex", "odom_ey", "odom_etheta"), ("m", "m", "rad"))
+
+
+def _queue_layout(prefix: str, layout: Layout, length: int) -> Layout:
+    """The names of a queue of ``length`` vectors of ``layout``, oldest first (``queued_0_tau_r``, ...)."""
+    names = tuple(f"{prefix}_{i}_{name}" for i in range(length) for name in layout.names)
+    return Layout(names, layout.units * length)
+
+
+def _join(*layouts: Layout) -> Layout:
+    return Layout(sum((lay.names for lay in layouts), ()), sum((lay.units for lay in layouts), ()))
+
+
+@pytree_dataclass
+class SensedPlant:
+    """``inner`` with an actuation delay, a measurement delay, encoders, odometry and an absolute fix (model.md §1.9).
+
+    Attributes
+    ----------
+    inner
+        the true robot, any :class:`~ddtrack.model.Plant`
+    nominal_radius, nominal_half_axle
+        the controller's R-hat, L-hat [m], with which odometry turns encoder increments into motion
+    true_radius, true_half_axle
+        the true R, L [m], with which the wheels turn as the body moves (unless ``inner`` has ``wheel_rates(x)``,
+        e.g. a plant whose wheels slip)
+    command_periods, command_fraction
+        the actuation delay tau_a = (k + f) T_c as k (whole periods) and f in [0, 1) (static)
+    measurement_periods
+        the measurement delay in whole periods (static)
+    encoder_counts
+        counts per wheel revolution; 0: the encoders read the exact angle
+    odometry
+        the controller sees the odometry estimate instead of the true body (static)
+    fix_gain, fix_position_std, fix_heading_std, fix_key
+        the absolute fix's blend weight in (0, 1], its noise on x and y [m] and on theta [rad], and the PRNG key
+        its noise is drawn from (per period, folded in by the period's index)
+    fix_periods
+        an absolute fix every this many periods; 0: none (static)
+    """
+
+    inner: Any
+    nominal_radius: Array | float
+    nominal_half_axle: Array | float
+    true_radius: Array | float
+    true_half_axle: Array | float
+    encoder_counts: Array | float = 0.0
+    fix_gain: Array | float = 0.0
+    fix_position_std: Array | float = 0.0
+    fix_heading_std: Array | float = 0.0
+    fix_key: Array | None = None
+    command_periods: int = static_field(default=0)
+    command_fraction: float = static_field(default=0.0)
+    measurement_periods: int = static_field(default=0)
+    odometry: bool = static_field(default=False)
+    fix_periods: int = static_field(default=0)
+
+    # --- layouts ------------------------------------------------------------------------------------------------
+
+    @property
+    def queue_length(self) -> int:
+        """Commands waiting: k, and one more when a fraction of a period splits it (the command that acts first)."""
+        return self.command_periods + (1 if self.command_fraction > 0.0 else 0)
+
+    @property
+    def own_angles(self) -> bool:
+        """The inner plant integrates its wheel angles itself (states ``phi_r``, ``phi_l``): odometry reads those."""
+        return set(WHEEL_ANGLES.names) <= set(self.inner.state_layout.names)
+
+    @property
+    def _parts(self) -> tuple[Layout, ...]:
+        none = Layout((), ())
+        odometry = (none if self.own_angles else WHEEL_ANGLES, ODOMETRY) if self.odometry else (none, none)
+        return (
+            self.inner.state_layout,
+            *odometry,
+            _queue_layout("queued", self.inner.input_layout, self.queue_length),
+            _queue_layout("delayed", BODY, self.measurement_periods),
+            FIX_CLOCK if self.fix_periods else none,
+        )
+
+    @property
+    def state_layout(self) -> Layout:
+        return _join(*self._parts)
+
+    @property
+    def recorded_layout(self) -> Layout:
+        """The states a run records: the inner plant's, the wheel angles and the odometry estimate (not the queues)."""
+        return _join(*self._parts[:3])
+
+    @property
+    def input_layout(self) -> Layout:
+        return self.inner.input_layout
+
+    @property
+    def logged_layout(self) -> Layout:
+        return _join(self.inner.logged_layout, ODOMETRY_ERROR) if self.odometry else self.inner.logged_layout
+
+    @property
+    def input_kind(self) -> str:
+        return self.inner.input_kind
+
+    @property
+    def description(self) -> str:
+        """The wrapped plant's name, for messages (``SensedPlant`` alone would not say which robot it is)."""
+        return f"{getattr(self.inner, 'description', type(self.inner).__name__)} behind its [sensing] chain"
+
+    def split(self, x: Array) -> tuple[Array, Array, Array, Array, Array]:
+        """(inner state, wheel angles (2,), estimate (5,), command queue (q, m), measurement queue (d, 5)) of x."""
+        sizes = [len(layout) for layout in self._parts]
+        bounds = [sum(sizes[:i]) for i in range(len(sizes) + 1)]
+        inner, phi, estimate, queued, delayed = (x[bounds[i] : bounds[i + 1]] for i in range(5))
+        if self.odometry and self.own_angles:
+            phi = self._inner_angles(inner)
+        return (
+            inner,
+            phi,
+            estimate,
+            queued.reshape(self.queue_length, len(self.input_layout)),
+            delayed.reshape(self.measurement_periods, len(BODY)),
+        )
+
+    # --- the plant ----------------------------------------------------------------------------------------------
+
+    def init(self, body: Array) -> Array:
+        """The inner state; wheel angles 0 and the estimate at the true start (the robot is told where it starts);
+        the queue full of the command held before the run (no torque, or the initial velocity for a velocity-
+        commanded robot: it was cruising); the measurement line full of the first measurement."""
+        inner = self.inner.init(body)
+        held = velocity(body) if self.input_kind == "velocity" else jnp.zeros(len(self.input_layout))
+        odometry = ([] if self.own_angles else [jnp.zeros(2)]) + [body] if self.odometry else []
+        first = body if self.odometry else self.inner.observe(inner)
+        queued = jnp.tile(held, self.queue_length)
+        delayed = jnp.tile(first, self.measurement_periods)
+        clock = jnp.zeros(1 if self.fix_periods else 0)  # periods since the start, for the fix's schedule and draws
+        return jnp.concatenate([inner, *odometry, queued, delayed, clock])
+
+    def saturate(self, u: Array) -> Array:
+        return self.inner.saturate(u)
+
+    def observe(self, x: Array) -> Array:
+        """The true body (what the run records and its metrics read)."""
+        return self.inner.observe(self.split(x)[0])
+
+    def reading(self, x: Array) -> Array:
+        """What the sensors read at x before any delay: the odometry estimate, or the true body without it."""
+        inner, _, estimate, _, _ = self.split(x)
+        return estimate if self.odometry else self.inner.observe(inner)
+
+    def measure(self, x: Array) -> Array:
+        """What the controller's sensors report at x (a BODY vector): the reading of ``measurement_periods`` ago."""
+        delayed = self.split(x)[4]
+        return delayed[0] if self.measurement_periods else self.reading(x)
+
+    def stretches(self, x: Array, u: Array) -> tuple[Array, list[tuple[Array, float]]]:
+        """Queue the command ``u`` of this period: (the queue after it, [(command, share of the period), ...]), the
+        commands acting over the period in order (one, or two when a fraction of a period splits it)."""
+        queued = self.split(x)[3]
+        if self.queue_length == 0:
+            return queued, [(u, 1.0)]
+        line = jnp.concatenate([queued, u[None]])
+        if self.command_fraction > 0.0:  # the older command acts first, for the fraction f of the period
+            return line[1:], [(line[0], self.command_fraction), (line[1], 1.0 - self.command_fraction)]
+        return line[1:], [(line[0], 1.0)]
+
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
+        """One control period: the queued commands drive the inner plant (the wheels turning with it), then the
+        odometry adds the period's encoder increments, and the measurement line takes this period's reading."""
+        inner, phi, estimate, _, delayed = self.split(x)
+        queued, acting = self.stretches(x, u)
+        inner_next, phi_next = inner, phi
+        done = 0
+        for i, (command, share) in enumerate(acting):
+            # the substeps shared by the stretches in proportion, at least one each
+            steps = substeps - done if i == len(acting) - 1 else max(1, round(substeps * share))
+            steps = max(1, steps)
+            done += steps
+            inner_next, phi_next = self._drive(inner_next, phi_next, command, tau_dist, share * period, steps)
+        parts = [inner_next]
+        if self.odometry:
+            if self.own_angles:
+                phi_next = self._inner_angles(inner_next)
+            increments = self._encoder(phi_next) - self._encoder(phi)
+            estimate = odometry_step(
+                estimate,
+                increments,
+                wheel_radius=self.nominal_radius,
+                half_axle=self.nominal_half_axle,
+                period=period,
+            )
+            if self.fix_periods:
+                estimate = self.fixed(estimate, self.inner.observe(inner_next), x[-1] + 1.0)
+            parts += [estimate] if self.own_angles else [phi_next, estimate]
+        if self.measurement_periods:
+            delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
+        tail = [x[-1:] + 1.0] if self.fix_periods else []
+        return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1), *tail])
+
+    def fixed(self, estimate: Array, body: Array, clock: Array) -> Array:
+        """The estimate after the absolute fix of period ``clock`` (a localisation of the true ``body``, noise
+        added), blended in with ``fix_gain`` when the period is due: pose + g (fix - pose), the heading gap wrapped."""
+        assert self.fix_key is not None, "a fix needs its key (Sensing.wrap gives it)"
+        xi = jax.random.normal(jax.random.fold_in(self.fix_key, clock.astype(jnp.int32)), (3,))
+        noise = jnp.stack([self.fix_position_std * xi[0], self.fix_position_std * xi[1], self.fix_heading_std * xi[2]])
+        gap = body[:3] + noise - estimate[:3]
+        gap = gap.at[2].set(jnp.arctan2(jnp.sin(gap[2]), jnp.cos(gap[2])))  # the short way round
+        due = jnp.mod(clock, self.fix_periods) == 0
+        return estimate.at[:3].add(jnp.where(due, self.fix_gain, 0.0) * gap)
+
+    def logged(self, x: Array, u: Array) -> dict[str, Array]:
+        """The inner plant's channels under the command acting at the period's start, and, with odometry, the
+        estimate's error (estimated minus true pose) ``odom_ex``, ``odom_ey`` [m], ``odom_etheta`` [rad]."""
+        inner, _, estimate, _, _ = self.split(x)
+        logs = self.inner.logged(inner, self.stretches(x, u)[1][0][0])
+        if self.odometry:
+            error = estimate[:3] - self.inner.observe(inner)[:3]
+            logs = logs | ODOMETRY_ERROR.columns(error)
+        return logs
+
+    # --- wheels -------------------------------------------------------------------------------------------------
+
+    def _inner_angles(self, inner: Array) -> Array:
+        """(phi_R, phi_L) [rad] of an inner plant that integrates them itself (:attr:`own_angles`)."""
+        return jnp.stack([inner[self.inner.state_layout.index(name)] for name in WHEEL_ANGLES.names])
+
+    def _encoder(self, phi: Array) -> Array:
+        """The angles [rad] the encoders report (a leaf, so runs with other counts share one compilation)."""
+        counts = jnp.asarray(self.encoder_counts, dtype=float)
+        return jnp.where(counts > 0, encoder_angle(phi, jnp.where(counts > 0, counts, 1.0)), phi)
+
+    def wheel_rates(self, inner: Array) -> Array:
+        """(phi_dot_R, phi_dot_L) [rad/s] at the inner state: the inner plant's own ``wheel_rates(x)`` if it has
+        them, else its states ``phidot_r``, ``phidot_l`` if it has those (a plant whose wheels slip), else W nu of its
+        body with the true R and L (wheels that roll without slipping)."""
+        own = getattr(self.inner, "wheel_rates", None)
+        if own is not None:
+            return own(inner)
+        names = self.inner.state_layout.names
+        if "phidot_r" in names and "phidot_l" in names:
+            return jnp.stack([inner[names.index("phidot_r")], inner[names.index("phidot_l")]])
+        v, omega = velocity(self.inner.observe(inner))
+        return jnp.stack([v + self.true_half_axle * omega, v - self.true_half_axle * omega]) / self.true_radius
+
+    def _drive(
+        self, inner: Array, phi: Array, u: Array, tau_dist: Array, duration: Array | float, steps: int
+    ) -> tuple[Array, Array]:
+        """The inner state and the wheel angles ``duration`` [s] later under the held command ``u``."""
+        if not self.odometry or self.own_angles:  # no angles to integrate, or the plant integrates its own
+            return self.inner.advance(inner, u, tau_dist, duration, steps), phi
+        plant = self.inner
+        if isinstance(plant, ODEPlant) and type(plant).advance is ODEPlant.advance:
+            # an ODE plant: the wheel angles integrate with its state, in the same RK4 steps
+            size = len(inner)
+
+            def rates(z: Array) -> Array:
+                return jnp.concatenate([plant.derivative(z[:size], u, tau_dist), self.wheel_rates(z[:size])])
+
+            z = rk4(rates, jnp.concatenate([plant.hold(inner, u), phi]), duration, steps)
+            return z[:size], z[size:]
+
+        # a plant with its own integrator: its steps one at a time, the angles by the trapezoid rule over each
+        def step(_: Any, carry: tuple[Array, Array]) -> tuple[Array, Array]:
+            state, angles = carry
+            after = plant.advance(state, u, tau_dist, duration / steps, 1)
+            return after, angles + 0.5 * duration / steps * (self.wheel_rates(state) + self.wheel_rates(after))
+
+        return jax.lax.fori_loop(0, steps, step, (inner, phi))
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """The sensing chain of a scenario (``[sensing]``), before it knows its plant.
+
+    Attributes
+    ----------
+    actuation_delay
+        tau_a [s], >= 0
+    measurement_delay
+        tau_m [s], a whole number of control periods
+    encoder_counts
+        counts per wheel revolution; 0: exact angles
+    odometry
+        the controller sees the odometry estimate
+    control_period
+        T_c [s]
+    fix_period, fix_gain, fix_position_std, fix_heading_std
+        an absolute fix every ``fix_period`` [s] (a whole number of periods; 0: none), blended in with weight
+        ``fix_gain``, with noise of these standard deviations [m], [rad]
+    """
+
+    actuation_delay: float = 0.0
+    measurement_delay: float = 0.0
+    encoder_counts: int = 0
+    odometry: bool = False
+    control_period: float = 0.01
+    fix_period: float = 0.0
+    fix_gain: float = 0.5
+    fix_position_std: float = 0.0
+    fix_heading_std: float = 0.0
+
+    def wrap(self, plant: Any, nominal: Any, true: Any, key: Array | None = None) -> SensedPlant:
+        """``plant`` behind this chain; ``nominal`` and ``true`` are the controller's and the plant's
+        :class:`~ddtrack.model.RobotParams` (``true`` may carry a batch axis, which the nominal values take);
+        ``key``, the PRNG key of the absolute fix's noise (default a fixed one), with that batch axis too."""
+        whole, fraction = split_delay(self.actuation_delay, self.control_period)
+        measured, _ = split_delay(self.measurement_delay, self.control_period)
+        fixes, _ = split_delay(self.fix_period, self.control_period)
+        if fixes and not self.odometry:
+            raise ValueError("an absolute fix corrects the odometry estimate: it needs odometry")
+        batch = jnp.shape(true.wheel_radius)
+        if fixes and key is None:
+            key = jnp.broadcast_to(jax.random.PRNGKey(0), (*batch, 2))
+
+        def like_batch(value: float) -> Array:
+            return jnp.broadcast_to(jnp.asarray(value, dtype=float), batch)
+
+        return SensedPlant(
+            plant,
+            like_batch(nominal.wheel_radius),
+            like_batch(nominal.half_axle),
+            true.wheel_radius,
+            true.half_axle,
+            like_batch(self.encoder_counts),
+            like_batch(self.fix_gain),
+            like_batch(self.fix_position_std),
+            like_batch(self.fix_heading_std),
+            key if fixes else None,
+            command_periods=whole,
+            command_fraction=fraction,
+            measurement_periods=measured,
+            odometry=self.odometry,
+            fix_periods=fixes,
+        )
