@@ -16,6 +16,7 @@ from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams
 from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
 from ddtrack.scenario import registry
+from ddtrack.sim.simulate import recorded
 
 sys.path.insert(0, str(ROOT / "examples" / "plugin" / "src"))  # the example plugin, as installed
 from ddtrack_integral_kanayama import wheel_angles
@@ -39,12 +40,21 @@ def scenario(*overrides):
 SEVEN = "plant.model=wheel_angles"
 
 
+def described(plant) -> str:
+    """The built plant and its layouts, for a failure's message (a CI run once saw it record no wheel angles)."""
+    kind = f"{type(plant).__module__}.{type(plant).__name__}"
+    return f"{kind}: states {plant.state_layout.names}, recorded {recorded(plant).names}"
+
+
 def test_a_seven_state_plant_runs_alone_and_matches_the_five_state_robot():
     paper, wheels = scenario(), scenario(SEVEN)
     setup, draws = prepare(paper)
     five = ddtrack.timeseries(run_setup(paper, setup, draws))
-    seven = ddtrack.timeseries(ddtrack.run(wheels))
-    assert set(seven) - set(five) == {"phi_r", "phi_l"}  # its own states, by their names; the rest unchanged
+    wheels_setup, wheels_draws = prepare(wheels)
+    seven = ddtrack.timeseries(run_setup(wheels, wheels_setup, wheels_draws))
+    assert set(seven) - set(five) == {"phi_r", "phi_l"}, described(
+        wheels_setup.plant
+    )  # its own states, by their names; the rest unchanged
     for name in five:  # the wheel angles feed nothing back, so the robot moves as the 5-state one does
         np.testing.assert_allclose(seven[name], five[name], rtol=1e-12, atol=1e-12, err_msg=name)
     # each wheel turned by the integral of its speed (v +- L omega) / r (trapezoids of the recorded speeds)
@@ -63,7 +73,11 @@ def test_a_seven_state_plant_runs_as_a_batch():
     seven, _ = prepare_batch(wheels, [0, 1, 2])
     result = run_setup(wheels, seven, draws, batched=True)
     assert result.state.shape[0] == 3 and result.state.shape[-1] == 5  # BODY rows, whatever the plant
-    assert set(result.plant_state) == {"phi_r", "phi_l"} and result.plant_state["phi_r"].shape == result.t.shape
+    why = (
+        f"{type(seven.plant).__name__}: states {seven.plant.state_layout.names}, recorded {recorded(seven.plant).names}"
+    )
+    assert set(result.plant_state) == {"phi_r", "phi_l"}, why
+    assert result.plant_state["phi_r"].shape == result.t.shape
     five, seven_rows = batch_metrics(paper, setup, draws), batch_metrics(paper, seven, draws)
     for a, b in zip(five, seven_rows, strict=True):
         assert b["e_tr_mean"] == pytest.approx(a["e_tr_mean"], rel=1e-12)
