@@ -72,7 +72,7 @@ def motor_metrics(motor: DCMotor, columns: dict, control_period: float) -> dict[
     }
 
 
-def scenario_motor(scenario: Any) -> DCMotor | None:
+def preset_motor(scenario: Any) -> DCMotor | None:
     """The motor of the scenario's ``[robot] preset`` as a :class:`DCMotor`, or None (no preset, or one without
     a datasheet motor: the paper's robot)."""
     from .model.motor_plants import motor_from_datasheet

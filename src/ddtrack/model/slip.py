@@ -37,8 +37,8 @@ from ..layout import WHEEL_TORQUES, Layout
 from .dynamics import wheel_friction
 from .motors import DCMotor, torque_driver
 from .params import RobotParams
+from .traction import GRAVITY
 
-GRAVITY = 9.80665  #: standard gravity [m/s^2] (the value of model/traction.py)
 #: the state of :class:`SlipPlant`: pose of A, its body-frame velocity and yaw rate, the wheels' spin speeds
 SLIP_STATE = Layout(
     ("x", "y", "theta", "u", "w", "r", "phidot_r", "phidot_l"),
@@ -210,7 +210,7 @@ def contact_stiffness(
         [[1.0, 0.0, half, -radius, 0.0], [0.0, 1.0, 0.0, 0.0, 0.0], [1.0, 0.0, -half, 0.0, -radius], [0, 1, 0, 0, 0]]
     )
     modes = np.linalg.eigvals(np.linalg.solve(mass_matrix, slip_map.T @ slip_map))
-    normal = m * GRAVITY * (1.0 - d / caster) / 2.0
+    normal = m * GRAVITY * float(load_fraction(params, caster)) / 2.0
     rate = friction * normal / slip_speed * float(np.max(modes.real))
     rate += (float(params.viscous_friction) + float(params.coulomb_friction) / float(params.friction_smoothing)) / spin
     if motor is not None:
