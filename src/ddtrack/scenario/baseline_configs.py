@@ -228,7 +228,7 @@ class AdaptiveBacksteppingConfig(_VelocityClamps, _KanayamaGains):
 
 
 class AdaptiveCompensatorConfig(_VelocityClamps, _KanayamaGains):
-    """Kanayama's law over Martins et al.'s adaptive inverse of a velocity-commanded base's lag (model.md §2.10)."""
+    """Kanayama's law over Martins et al.'s adaptive inverse of a velocity-commanded base's lag (model.md §2.8)."""
 
     kind: Literal["adaptive_compensator"]
     compensator_gain: tuple[Positive, Positive] = Field(

@@ -1,5 +1,5 @@
 """Martins et al.'s adaptive dynamic compensator: Kanayama's kinematic law outside, the inverse of the identified
-velocity-lag model inside, its six parameters adapted online (model.md §2.10).
+velocity-lag model inside, its six parameters adapted online (model.md §2.8).
 
 F. N. Martins, W. C. Celeste, R. Carelli, M. Sarcinelli-Filho, T. F. Bastos-Filho, "An adaptive dynamic controller
 for autonomous mobile robot trajectory tracking", Control Engineering Practice 16:1354-1363, 2008. A base that takes
@@ -87,13 +87,14 @@ class AdaptiveDynamicCompensator:
 
     In: measured state y = [x, y, theta, v, omega] and the reference. Out: the velocity command nu* = (v* [m/s],
     omega* [rad/s]) for a velocity-commanded base. ``outer`` is the kinematic law; its clamps bound nu_c and nu*,
-    and the estimates hold still in a period where either clamp acts (set them to the base's limits);
+    and the estimates hold still in a period where either clamp acts (set them to the base's limits).
     ``compensator_gain`` = K (k_v, k_omega) [1/s]; ``adaptation_rate`` = diag(Gamma), one per theta_i (0 freezes
     it); ``leakage`` = lambda [1/s]; ``theta0`` the prior and initial estimate; ``command_rate`` how nu_c_dot is
-    had: ``"analytic"``
-    (the kinematic law's own derivative, model.md §2.5) or ``"difference"`` ((nu_c,k - nu_c,k-1) / T_c, late by half
-    a period, as on a robot whose kinematic law is a black box). Memory: :class:`CompensatorMemory`. Logs:
-    ``v_cmd``, ``omega_cmd`` (nu_c), ``saturated`` (a clamp on nu_c or nu* acted), the gains, ``theta1_hat`` ..
+    had: ``"analytic"`` (the kinematic law's own derivative, model.md §2.5) or ``"difference"`` ((nu_c,k -
+    nu_c,k-1) / T_c from memory: late by half a period, and it amplifies pose noise, which then drifts theta_hat).
+
+    Memory: :class:`CompensatorMemory`. Logs: ``v_cmd``, ``omega_cmd`` (nu_c), ``v_star``, ``omega_star`` (nu*,
+    what the base is sent), ``saturated`` (a clamp on nu_c or nu* acted), the gains, ``theta1_hat`` ..
     ``theta6_hat`` (the estimate this period's command used), ``v_error``, ``omega_error`` (nu_c - nu) and
     ``v_accel_cmd``, ``omega_accel_cmd`` (sigma [m/s^2, rad/s^2]).
     """
@@ -144,6 +145,8 @@ class AdaptiveDynamicCompensator:
             "saturated": saturated,
             **outer_logs,
             **{name: memory.theta_hat[i] for i, name in enumerate(THETA_LOGS)},
+            "v_star": nu_star[0],
+            "omega_star": nu_star[1],
             "v_error": error[0],
             "omega_error": error[1],
             "v_accel_cmd": sigma[0],
