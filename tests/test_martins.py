@@ -17,11 +17,13 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
+from ddtrack.controllers import Backstepping
 from ddtrack.controllers.baselines import AdaptiveDynamicCompensator, compensator_command, lag_regressor
 from ddtrack.metrics import summarize
 from ddtrack.model.lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant
 from ddtrack.runner import prepare
 from ddtrack.scenario import controller_kind
+from ddtrack.trajectories import Line
 
 KIND = "adaptive_compensator"
 #: the Pioneer 3-DX on its identified lag (theta with laser), the compensator's clamps at the base's top speed
@@ -80,6 +82,35 @@ def test_the_command_is_the_exact_inverse_of_the_lag_model():
     plant = LagPlant(PIONEER_3DX_ALTERNATIVE)
     nu_dot = plant.derivative(jnp.asarray([0.0, 0.0, 0.0, *nu]), command, jnp.zeros(2))[3:]
     np.testing.assert_allclose(lag_regressor(nu_dot, nu) @ jnp.asarray(PIONEER_3DX_ALTERNATIVE), command, atol=1e-15)
+
+
+def test_one_period_of_the_law_by_hand():
+    """Two periods on a line, off the path: sigma = nu_c_dot + K (nu_c - nu) with nu_c_dot the finite difference
+    of the two commands over T_c ("difference") or the kinematic law's own rate ("analytic"), nu* = G(sigma, nu)
+    theta_hat, and one explicit-Euler step of theta_hat_dot = Gamma G^T (nu_c - nu) - lambda (theta_hat - theta0)."""
+    line = Line(start=(0.0, 0.0), heading=0.0, speed=0.5)
+    theta0 = jnp.asarray(PIONEER_3DX_ALTERNATIVE)
+    gamma, leakage, period, gain = jnp.asarray([0.3, 0.2, 0.1, 0.4, 0.5, 0.6]), 0.7, 0.01, jnp.asarray([3.0, 5.0])
+    x0 = jnp.asarray([-0.01, 0.005, 0.01, 0.4, 0.0])
+    y1 = jnp.asarray([-0.006, 0.0052, 0.011, 0.45, 0.05])
+    for rate in ("difference", "analytic"):
+        law = AdaptiveDynamicCompensator(
+            Backstepping(), gain, gamma, leakage, theta0, control_period=period, command_rate=rate
+        )
+        memory = law.init(x0, line(0.0), jax.random.PRNGKey(0))
+        memory = memory._replace(theta_hat=theta0 * 1.1)  # an estimate away from the prior, so the leakage acts
+        command, _, _ = law.outer.command(period, y1, line(period), ())
+        nu_star, updated, logs = law.step(jnp.asarray(period), y1, line(period), memory)
+        nu_c_dot = (command.nu_c - memory.previous_command) / period if rate == "difference" else command.nu_c_dot
+        error = command.nu_c - y1[3:]
+        sigma = nu_c_dot + gain * error
+        np.testing.assert_allclose([logs["v_accel_cmd"], logs["omega_accel_cmd"]], sigma, rtol=1e-14, atol=1e-14)
+        g = lag_regressor(sigma, y1[3:])
+        np.testing.assert_allclose(nu_star, g @ memory.theta_hat, rtol=1e-14, atol=1e-14)
+        expected = memory.theta_hat + period * (gamma * (g.T @ error) - leakage * (memory.theta_hat - theta0))
+        np.testing.assert_allclose(updated.theta_hat, expected, rtol=1e-14, atol=1e-15)
+        assert float(logs["saturated"]) == 0.0 and np.array_equal(updated.previous_command, command.nu_c)
+    assert not np.allclose(nu_c_dot, (command.nu_c - memory.previous_command) / period)  # the two rates differ
 
 
 def test_frozen_at_the_truth_every_period_accelerates_at_sigma(eight):
