@@ -8,7 +8,8 @@ reaches every controller's code on every trajectory at a twentieth of the cost. 
 is recorded with its refusal. Every number must agree to 1e-12 relative (or 1e-12 absolute, for values that are
 zero up to rounding, such as the exact kinematic law's error on a straight leg).
 
-To record the file again, deliberately: ``python tests/test_golden.py`` (then say why in the commit).
+To record the file again, deliberately: ``python tests/test_golden.py`` (``python tests/test_golden.py NAME ...``
+for only those scenarios), then say why in the commit.
 """
 
 from __future__ import annotations
@@ -90,7 +91,17 @@ def test_the_comparison_can_fail():
 
 if __name__ == "__main__":  # record the golden file (deliberately; see the module docstring)
     sys.path.insert(0, str(ROOT / "src"))
-    golden = {path.stem: json.loads(json.dumps(scenario_cases(path), allow_nan=False)) for path in SHIPPED}
+    import ddtrack
+
+    ddtrack.enable_float64()  # as the test session does (conftest.py)
+    names = set(sys.argv[1:])  # python tests/test_golden.py NAME ...: record only those scenarios, keep the rest
+    unknown = names - {path.stem for path in SHIPPED}
+    if unknown:
+        sys.exit(f"no shipped scenario named {', '.join(sorted(unknown))}")
+    golden = json.loads(GOLDEN.read_text()) if names else {}
+    for path in SHIPPED:
+        if not names or path.stem in names:
+            golden[path.stem] = json.loads(json.dumps(scenario_cases(path), allow_nan=False))
     GOLDEN.parent.mkdir(exist_ok=True)
     GOLDEN.write_text(json.dumps(golden, indent=1, sort_keys=True) + "\n")
     print(f"wrote {GOLDEN.relative_to(ROOT)}: {sum(len(cases) for cases in golden.values())} cases")
