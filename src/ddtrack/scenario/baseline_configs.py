@@ -15,12 +15,14 @@ from ..controllers import (
 from ..controllers.baselines import (
     MPPI,
     AdaptiveComputedTorque,
+    AdaptiveDynamicCompensator,
     LTVUnicycleLQR,
     MPPICost,
     RegulatedPurePursuit,
     SlidingModeTorque,
 )
 from ..model import RobotParams
+from ..model.lag import PIONEER_3DX_WITH_LASER
 from ..trajectories import Trajectory
 from ._base import (
     FieldError,
@@ -223,6 +225,47 @@ class AdaptiveBacksteppingConfig(_VelocityClamps, _KanayamaGains):
             upper=(high * nominal.mass, high * nominal.inertia, max(self.max_friction, nominal.viscous_friction)),
         )
         return Cascade(outer, inner)
+
+
+class AdaptiveCompensatorConfig(_VelocityClamps, _KanayamaGains):
+    """Kanayama's law over Martins et al.'s adaptive inverse of a velocity-commanded base's lag (model.md §2.8)."""
+
+    kind: Literal["adaptive_compensator"]
+    compensator_gain: tuple[Positive, Positive] = Field(
+        (4.0, 4.0),
+        description=(
+            "K (k_v, k_omega): the velocity error nu_c - nu decays at this rate on an exactly known base [1/s]."
+        ),
+    )
+    adaptation_rate: tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative] = Field(
+        (0.05, 0.05, 0.0, 0.05, 0.0, 0.05),
+        description=(
+            "Gamma, one rate per theta_1..theta_6 (0 freezes that estimate at theta0); the coupling terms "
+            "theta_3, theta_5 are frozen by default."
+        ),
+    )
+    leakage: NonNegative = Field(
+        0.01, description="lambda: the estimates leak back toward theta0 at this rate (sigma-modification) [1/s]."
+    )
+    theta0: tuple[Positive, Positive, float, float, float, float] = Field(
+        PIONEER_3DX_WITH_LASER,
+        description=(
+            "The prior and initial estimate of theta_1..theta_6 [s, s, s m/rad^2, 1, s/m, 1]; the default is the "
+            "Pioneer 3-DX's identified set (with laser)."
+        ),
+    )
+    command_rate: Literal["analytic", "difference"] = Field(
+        "analytic",
+        description=(
+            "nu_c_dot from the kinematic law's analytic derivative, or as (nu_c - previous nu_c) / T_c from memory."
+        ),
+    )
+
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> AdaptiveDynamicCompensator:
+        """The controller; ``nominal`` and ``key`` are unused (the lag model has no mass, nothing is drawn)."""
+        kx, ky, ktheta = self.gains
+        outer = same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
+        return same_named(self, AdaptiveDynamicCompensator, outer=outer, control_period=control_period)
 
 
 class MPPIConfig(_Section):

@@ -28,6 +28,7 @@ from ..trajectories import Trajectory
 from ._base import FieldError
 from .baseline_configs import (
     AdaptiveBacksteppingConfig,
+    AdaptiveCompensatorConfig,
     KinematicBacksteppingConfig,
     LTVLQRConfig,
     MPPIConfig,
@@ -440,6 +441,7 @@ register_controller(KinematicBacksteppingConfig, has_kanayama_gains=True, output
 register_controller(RegulatedPurePursuitConfig, needs_reference=True)
 register_controller(AdaptiveBacksteppingConfig, has_kanayama_gains=True)
 register_controller(MPPIConfig, needs_reference=True)
+register_controller(AdaptiveCompensatorConfig, output="velocity")
 for _trajectory in (
     LineTrajectory,
     SquareTrajectory,

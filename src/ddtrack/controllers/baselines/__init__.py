@@ -2,6 +2,7 @@
 
 from .adaptive import AdaptiveComputedTorque, regressor
 from .ltv_lqr import LTVUnicycleLQR, lqr_gain, solve_dare, unicycle_error_model
+from .martins import AdaptiveDynamicCompensator, CompensatorMemory, compensator_command, lag_regressor
 from .mppi import MPPI, MPPICost, MPPIMemory, preview, rollout
 from .pure_pursuit import RegulatedPurePursuit, find_carrot, pursuit_curvature
 from .sliding_mode import SlidingModeTorque, switching_term
@@ -9,12 +10,16 @@ from .sliding_mode import SlidingModeTorque, switching_term
 __all__ = [
     "MPPI",
     "AdaptiveComputedTorque",
+    "AdaptiveDynamicCompensator",
+    "CompensatorMemory",
     "LTVUnicycleLQR",
     "MPPICost",
     "MPPIMemory",
     "RegulatedPurePursuit",
     "SlidingModeTorque",
+    "compensator_command",
     "find_carrot",
+    "lag_regressor",
     "lqr_gain",
     "preview",
     "pursuit_curvature",
