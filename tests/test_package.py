@@ -42,7 +42,7 @@ LAYERS = [
     {"rundir"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep"},
-    {"suite"},
+    {"suite", "robot_suite"},
     {"cluster"},
     {"cli"},
 ]

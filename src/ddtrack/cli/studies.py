@@ -305,12 +305,18 @@ def sweep(
 @click.option(
     "--suite",
     "suite_name",
-    type=click.Choice(["quick", "standard"]),
+    type=click.Choice(["quick", "standard", "robots"]),
     default="quick",
     show_default=True,
-    help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds.",
+    help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds; robots: "
+    "4 robot presets x 2 paths x 6 conditions x 3 seeds, each robot on the plant it really has.",
 )
-@click.option("--controllers", metavar="A,B,...", help="Controllers to rank [default: all, and backstepping_tuned].")
+@click.option(
+    "--controllers",
+    metavar="A,B,...",
+    help="Controllers to rank [default: all, and backstepping_tuned; for robots, every torque law and every "
+    "velocity law, label/cmd_vel for a law over cmd_vel].",
+)
 @click.option(
     "--out",
     type=click.Path(path_type=Path),
@@ -332,6 +338,8 @@ def bench(
     """Rank controllers over trajectories, uncertainty levels and seeds on common random numbers, with a
     robustness map over mass and friction; see docs/benchmarks.md."""
     check_cluster_options(scheduler, scheduler_file, workers)
+    if suite_name == "robots":
+        return _bench_robots(controllers, out, overwrite, scheduler, scheduler_file, workers)
     from ..outdir import check_output, start_resumable
     from ..suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
 
@@ -352,5 +360,38 @@ def bench(
         f"{summary['runs']} runs ({summary['reused']} reused), {summary['not_ok']} diverged or non-finite, "
         f"{summary['errors']} errors; wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, "
         "robustness.png, boxplots.png"
+    )
+    return 1 if summary["errors"] else 0
+
+
+def _bench_robots(
+    controllers: str | None,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
+    """``bench --suite robots``: every cell planned first (bad input writes nothing), then run and summarised."""
+    import time
+
+    from ..outdir import check_output, start_resumable
+    from ..robot_suite import RobotSuite, board_markdown, entry_labels, plan_robot_suite, run_robot_suite
+
+    names = entry_labels([c.strip() for c in controllers.split(",") if c.strip()] if controllers else None)
+    suite = RobotSuite()
+    plan_robot_suite(suite, names)
+    study = f"robots: {', '.join(names)}"
+    resume = check_output(out, command="bench", overwrite=overwrite, study=study)
+    enable_compilation_cache()
+    start = time.perf_counter()
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        start_resumable(out, command="bench", study=study, resume=resume)
+        summary = run_robot_suite(suite, names, out, client, on_record=lambda done, total: advance(done, total=total))
+    click.echo(board_markdown(summary, suite.conditions), nl=False)
+    click.echo(
+        f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "
+        f"{summary['not_ok']} diverged or non-finite, {summary['errors']} errors; "
+        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, robots.png"
     )
     return 1 if summary["errors"] else 0

@@ -1,0 +1,179 @@
+"""``ddtrack bench --suite robots``: each preset drives the plant it really has, conditions change what they say,
+cells a robot's model cannot express are left out and listed, and the leaderboard, the ranking agreement and the
+NN-adaptive law's paired improvement are computed from the runs. A tiny suite (short runs, one worker on 127.0.0.1)
+keeps it fast; the real suite and its reading are in docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from ddtrack.metrics import pooled_improvement
+from ddtrack.robot_suite import (
+    ENTRY,
+    ROBOTS,
+    RobotSuite,
+    cells,
+    paired,
+    plan_robot_suite,
+    ranking_agreement,
+    robot_board,
+    run_robot_suite,
+)
+from ddtrack.robots import PRESETS
+
+SHORT = ("simulation.duration=4", "simulation.metric_window=[1, 4]")
+
+
+def _scenario(plan, robot, controller, condition, trajectory="figure_eight"):
+    (found,) = [
+        c.scenario
+        for c in plan.configurations
+        if c.controller == controller
+        and c.labels == {"study": "robots", "robot": robot, "trajectory": trajectory, "condition": condition}
+    ]
+    return found
+
+
+def test_each_robot_drives_the_plant_it_has_and_each_condition_changes_what_it_says():
+    labels = ["backstepping", "kinematic_backstepping"]
+    plan = plan_robot_suite(RobotSuite(seeds=1), labels)
+    assert _scenario(plan, "paper", "backstepping", "nominal").plant.model == "dynamic"
+    assert _scenario(plan, "turtlebot3_burger", "backstepping", "nominal").plant.model == "slip"
+    assert _scenario(plan, "turtlebot3_burger", "kinematic_backstepping", "nominal").plant.model == "slip_velocity"
+    assert _scenario(plan, "pioneer_3dx", "kinematic_backstepping", "nominal").plant.model == "lag"
+    burger = PRESETS["turtlebot3_burger"]
+    nominal = _scenario(plan, "turtlebot3_burger", "kinematic_backstepping", "nominal")
+    assert nominal.simulation.control_period == 0.05 and nominal.plant.floor_friction == 1.0
+    assert nominal.controller.max_velocity == burger.max_speed  # clamped at what the robot can do
+    assert _scenario(plan, "turtlebot3_burger", "backstepping", "latency_150ms").sensing.actuation_delay == 0.15
+    assert _scenario(plan, "turtlebot3_burger", "backstepping", "floor_mu_0.4").plant.floor_friction == 0.4
+    odometry = _scenario(plan, "turtlebot3_burger", "backstepping", "odometry")
+    radius = burger.params["wheel_radius"]
+    assert odometry.sensing.odometry and odometry.sensing.encoder_counts == burger.motor.encoder_counts
+    assert odometry.robot.params().wheel_radius == pytest.approx(1.01 * radius)  # what odometry believes
+    assert odometry.plant_params().wheel_radius == radius  # the true wheel
+    payload = _scenario(plan, "turtlebot3_burger", "backstepping", "payload_+50%")
+    assert payload.plant_params().mass == pytest.approx(1.5 * burger.params["mass"])
+    assert payload.robot.params().mass == burger.params["mass"]  # the controller does not know
+    square = _scenario(plan, "pioneer_3dx", "kinematic_backstepping", "nominal", "square")
+    assert square.trajectory.speed == ROBOTS["pioneer_3dx"].speed
+
+
+def test_cells_a_robot_cannot_express_are_left_out_and_say_why():
+    run, left = cells(RobotSuite(), ["backstepping", "kinematic_backstepping"])
+    why = {(c["robot"], c["controller"], c["condition"]): c["why"] for c in left}
+    assert why[("pioneer_3dx", "backstepping", "nominal")] == "takes no torque commands"
+    assert why[("paper", "kinematic_backstepping", "nominal")] == "takes no velocity commands"
+    assert why[("pioneer_3dx", "kinematic_backstepping", "payload_+50%")] == "its model has no mass"
+    assert why[("paper", "backstepping", "floor_mu_0.4")] == "its model has no floor"
+    ran = {(c["robot"], c["controller"], c["condition"]) for c in run}
+    assert not ran & set(why)
+    assert len(run) == 2 * (2 * 6 * 2 + 5 + 4)  # two paths x (Burger, Waffle: 6 conditions x 2 laws; paper 5; Pioneer 4)
+
+
+def test_bad_controller_names_are_refused_before_anything_runs(tmp_path):
+    out = tmp_path / "bench"
+    done = subprocess.run(
+        [sys.executable, "-m", "ddtrack", "bench", "--suite", "robots", "--controllers", "backsteping", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "--controllers" in done.stderr and "backstepping" in done.stderr and "Traceback" not in done.stderr
+    assert not out.exists()
+
+
+def _run(robot, controller, condition, seed, error, trajectory="figure_eight"):
+    return {
+        "robot": robot,
+        "controller": controller,
+        "condition": condition,
+        "trajectory": trajectory,
+        "seed": seed,
+        "status": "ok",
+        "e_tr_mean": error,
+        "implausible": False,
+    }
+
+
+def test_the_boards_rank_by_the_nominal_condition_and_pair_by_cell():
+    runs = [
+        _run("r", name, condition, seed, error * factor * (1 + 0.1 * seed))
+        for name, error in (("backstepping", 2.0), ("nn_adaptive_backstepping", 1.0), ("mppi", 3.0))
+        for condition, factor in (("nominal", 1.0), ("latency_50ms", 5.0))
+        for seed in range(3)
+    ]
+    runs[0]["implausible"] = True
+    board = robot_board(runs, "r", ["backstepping", "nn_adaptive_backstepping", "mppi"], ["nominal", "latency_50ms"])
+    assert [e["controller"] for e in board] == ["nn_adaptive_backstepping", "backstepping", "mppi"]
+    first = {e["controller"]: e for e in board}["backstepping"]
+    assert first["implausible"] == 1 and first["runs"] == 6 and first["failures"] == 0
+    assert first["nominal"]["mean"] == pytest.approx(np.mean([2.0, 2.2, 2.4]))
+    improvement = paired(runs, "r", "backstepping", "nn_adaptive_backstepping")
+    mine = [r for r in runs if r["controller"] == "nn_adaptive_backstepping"]
+    base = {(r["condition"], r["seed"]): r["e_tr_mean"] for r in runs if r["controller"] == "backstepping"}
+    by_hand = pooled_improvement([base[(r["condition"], r["seed"])] for r in mine], [r["e_tr_mean"] for r in mine])
+    assert improvement == by_hand and improvement["mean"] == pytest.approx(50.0)
+    assert paired(runs, "r", "backstepping", "ltv_lqr") is None  # never ran: no answer, not zero
+
+
+def test_ranking_agreement_is_kendalls_tau_over_shared_controllers():
+    def board(errors):
+        return [{"controller": c, "nominal": {"mean": e}} for c, e in errors.items()]
+
+    paper = board({"a": 1.0, "b": 2.0, "c": 3.0, "d": 4.0})
+    same, reversed_ = board({"a": 0.1, "b": 0.2, "c": 0.3, "d": 0.4, "x": 0.0}), board({"a": 4, "b": 3, "c": 2, "d": 1})
+    agreement = ranking_agreement({"paper": paper, "same": same, "reversed": reversed_})
+    assert agreement["same"]["tau"] == pytest.approx(1.0) and agreement["same"]["controllers"] == ["a", "b", "c", "d"]
+    assert agreement["reversed"]["tau"] == pytest.approx(-1.0)
+
+
+TINY = RobotSuite(
+    robots=("paper", "turtlebot3_burger"),
+    trajectories=("figure_eight",),
+    conditions=("nominal", "floor_mu_0.4"),
+    seeds=2,
+    overrides=SHORT,
+)
+LAWS = ["backstepping", "kinematic_backstepping"]
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    from distributed import Client
+
+    from ddtrack.cluster import local_cluster
+
+    out = tmp_path_factory.mktemp("robots")
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        first = run_robot_suite(TINY, LAWS, out, client)
+        again = run_robot_suite(TINY, LAWS, out, client)
+    return out, first, again
+
+
+@pytest.mark.slow
+def test_a_tiny_robots_suite_runs_every_cell_once_and_reports_from_the_runs(finished):
+    out, first, again = finished
+    # paper: backstepping nominal (no floor, no velocity input); Burger: both laws, both floors; x 2 seeds
+    assert first["runs"] == (1 + 2 * 2) * 2 and first["errors"] == 0 and first["not_ok"] == 0
+    assert again["reused"] == first["runs"] and again["boards"] == first["boards"]
+    runs = pq.read_table(out / "results.parquet").to_pylist()
+    burger = {e["controller"]: e for e in first["boards"]["turtlebot3_burger"]}
+    for law in LAWS:
+        mine = [r["e_tr_mean"] for r in runs if r["controller"] == law and r["label.robot"] == "turtlebot3_burger"]
+        assert burger[law]["all"]["mean"] == pytest.approx(np.mean(mine))
+        assert burger[law]["runs"] == 4
+    text = (out / "leaderboard.md").read_text()
+    assert "### turtlebot3_burger" in text and "floor_mu_0.4" in text
+    assert "paper takes no velocity commands (kinematic_backstepping)" in text
+    assert "paper its model has no floor (floor_mu_0.4)" in text
+    assert (out / "robots.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((out / "leaderboard.json").read_text())["controllers"] == LAWS
+    assert set(ENTRY) >= set(LAWS)
