@@ -2,7 +2,8 @@
 
     python bench/slip_throughput.py [--json] [--batch 256] [--duration 10] [--repeats 2]
 
-Cases (backstepping at 10 ms, ``simulation.substeps = 10``; the no-slip plants with the same wheel inertia):
+Cases (backstepping, or kinematic backstepping where named, at 10 ms, ``simulation.substeps = 10``; the no-slip plants
+with the same wheel inertia):
 
 * ``turtlebot3_burger``: the circle of ``scenarios/burger_20hz.toml`` on the preset with its motors;
   ``motor_torque`` (no slip, motors through the current driver) and ``dynamic`` against ``slip`` (RK4, its sub-steps
@@ -10,7 +11,9 @@ Cases (backstepping at 10 ms, ``simulation.substeps = 10``; the no-slip plants w
 * ``paper_geared``: the paper's line case (``scenarios/paper_line.toml``) with J_w = 0.005 kg m^2; ``dynamic``
   against ``slip`` (RK4);
 * ``paper_light_wheel``: the same with a 0.1 kg wheel, J_w = 1.25e-4 kg m^2; ``dynamic`` against ``slip`` (the
-  Rosenbrock step).
+  Rosenbrock step);
+* ``turtlebot3_burger_cmd_vel``: the Burger's circle under kinematic backstepping over its PI wheel-speed loop,
+  ``motor_velocity`` (no slip) against ``slip_velocity``.
 
 What is timed is ``runner.batch_metrics`` (the path of ``ddtrack mc``), compile excluded (one warm-up call), best of
 ``repeats``. Prints robot control steps per second and the ratio slip / no-slip.
@@ -27,18 +30,25 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMON = ["simulation.control_period=0.01", "simulation.substeps=10"]
+BURGER = ['robot.preset="turtlebot3_burger"', "plant.com_offset=-0.01"]
+#: case: (scenario file, overrides, slip model, no-slip models, controller)
 CASES = {
-    "turtlebot3_burger": (
+    "turtlebot3_burger": ("burger_20hz.toml", BURGER, "slip", ("motor_torque", "dynamic"), "backstepping"),
+    "paper_geared": ("paper_line.toml", ["plant.wheel_inertia=0.005"], "slip", ("dynamic",), "backstepping"),
+    "paper_light_wheel": ("paper_line.toml", ["plant.wheel_inertia=0.000125"], "slip", ("dynamic",), "backstepping"),
+    "turtlebot3_burger_cmd_vel": (
         "burger_20hz.toml",
-        ['robot.preset="turtlebot3_burger"', "plant.com_offset=-0.01"],
-        ("motor_torque", "dynamic"),
+        BURGER,
+        "slip_velocity",
+        ("motor_velocity",),
+        "kinematic_backstepping",
     ),
-    "paper_geared": ("paper_line.toml", ["plant.wheel_inertia=0.005"], ("dynamic",)),
-    "paper_light_wheel": ("paper_line.toml", ["plant.wheel_inertia=0.000125"], ("dynamic",)),
 }
 
 
-def throughput(file: str, overrides: list[str], model: str, batch: int, duration: float, repeats: int) -> dict:
+def throughput(
+    file: str, overrides: list[str], model: str, controller: str, batch: int, duration: float, repeats: int
+) -> dict:
     """Robot control steps per second of ``batch`` runs of scenario ``file`` on plant ``model``."""
     import ddtrack
 
@@ -47,7 +57,7 @@ def throughput(file: str, overrides: list[str], model: str, batch: int, duration
 
     sets = [*COMMON, *overrides, f"plant.model={model}", f"simulation.duration={duration}"]
     sets.append(f"simulation.metric_window=[0, {duration}]")
-    scenario = ddtrack.load_scenario(ROOT / "scenarios" / file, overrides=sets, controller="backstepping")
+    scenario = ddtrack.load_scenario(ROOT / "scenarios" / file, overrides=sets, controller=controller)
     setup, draws = prepare_batch(scenario, list(range(batch)))
     plant = setup.plant
     start = time.perf_counter()
@@ -80,11 +90,11 @@ def main() -> None:
     args = parser.parse_args()
     report: dict = {"machine": {"cpus": len(os.sched_getaffinity(0)), "processor": platform.processor()}}
     for case in args.cases.split(","):
-        file, overrides, references = CASES[case]
-        slip = throughput(file, overrides, "slip", args.batch, args.duration, args.repeats)
-        rows = {"slip": slip}
+        file, overrides, slip_model, references, controller = CASES[case]
+        slip = throughput(file, overrides, slip_model, controller, args.batch, args.duration, args.repeats)
+        rows = {slip_model: slip}
         for model in references:
-            rows[model] = throughput(file, overrides, model, args.batch, args.duration, args.repeats)
+            rows[model] = throughput(file, overrides, model, controller, args.batch, args.duration, args.repeats)
             rows[model]["slip_ratio"] = slip["robot_steps_per_s"] / rows[model]["robot_steps_per_s"]
         report[case] = rows
         if not args.json:

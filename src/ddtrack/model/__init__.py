@@ -39,6 +39,7 @@ from .params import RobotParams
 from .plants import DynamicPlant, KinematicPlant, ODEPlant, Plant
 from .sensed import SensedPlant, Sensing
 from .slip import SlipPlant, slip_plant, slip_plant_model
+from .slip_velocity import SlipVelocityPlant, slip_velocity_model
 
 __all__ = [
     "PIONEER_3DX_ALTERNATIVE",
@@ -54,6 +55,7 @@ __all__ = [
     "SensedPlant",
     "Sensing",
     "SlipPlant",
+    "SlipVelocityPlant",
     "TorqueDrivenPlant",
     "VelocityDrivenPlant",
     "VelocityDriver",
@@ -76,6 +78,7 @@ __all__ = [
     "reduced_mass",
     "slip_plant",
     "slip_plant_model",
+    "slip_velocity_model",
     "torque_driven_model",
     "torque_driver",
     "torque_envelope",

@@ -85,6 +85,24 @@ class TorqueDrivenPlant(ODEPlant):
         return _motor_logs(*self.applied(x, u))
 
 
+def cruise_integral(params: RobotParams, driver: VelocityDriver, nu: Array) -> Array:
+    """The PI integrals z_R, z_L [rad] of a base that has been cruising at nu = (v, omega) (model.md §1.7).
+
+    A constant velocity nu needs the wheel torques tau = tau_f(W nu) + B_bar^{-1} V_bar(nu) nu (friction and the
+    centre-of-mass offset's term, model.md §1.3), so the currents tau / (eta k_t) and the voltages R_a i + k_e W nu;
+    with no speed error all of it comes from the integral, z = u / k_i. At rest this is 0. Zeros instead would make
+    a robot that starts moving brake until its integrators wind up, an artefact of the start, not of the
+    controller. A speed the motors cannot hold (beyond the no-load speed) gets the integral it would need all the
+    same; with k_i = 0 (a P loop) the integrals stay 0.
+    """
+    speeds = wheel_speeds(params, nu)
+    torque = wheel_friction(params, speeds) + reduced_input_inverse(params) @ reduced_coriolis(params, nu)
+    motor = driver.motor
+    voltage = motor.resistance * torque / (motor.efficiency * motor.torque_constant) + motor.back_emf * speeds
+    ki = jnp.asarray(driver.ki, dtype=float)
+    return jnp.where(ki != 0.0, voltage / jnp.where(ki != 0.0, ki, 1.0), 0.0)
+
+
 @pytree_dataclass
 class VelocityDrivenPlant(ODEPlant):
     """The robot of model.md §1.3 whose motors a PI wheel-speed loop drives (model.md §1.7), as ``cmd_vel`` does.
@@ -109,25 +127,9 @@ class VelocityDrivenPlant(ODEPlant):
     logged_layout: ClassVar[Layout] = MOTOR_LOGS
 
     def init(self, body: Array) -> Array:
-        """BODY and the integrals that hold its speeds: the integrators of a base that has been cruising at them.
-
-        A constant velocity nu needs the wheel torques tau = tau_f(W nu) + B_bar^{-1} V_bar(nu) nu (friction and
-        the centre-of-mass offset's term, model.md §1.3), so the currents tau / (eta k_t) and the voltages
-        R_a i + k_e W nu; with no speed error all of it comes from the integral, z = u / k_i. At rest this is 0.
-        Zeros instead would make a robot that starts moving brake until its integrators wind up, an artefact of
-        the start, not of the controller. A speed the motors cannot hold (beyond the no-load speed) gets the
-        integral it would need all the same; with k_i = 0 (a P loop) the integrals stay 0.
-        """
-        nu = velocity(body)
-        speeds = wheel_speeds(self.params, nu)
-        torque = wheel_friction(self.params, speeds) + reduced_input_inverse(self.params) @ reduced_coriolis(
-            self.params, nu
-        )
-        motor = self.driver.motor
-        voltage = motor.resistance * torque / (motor.efficiency * motor.torque_constant) + motor.back_emf * speeds
-        ki = jnp.asarray(self.driver.ki, dtype=float)
-        integral = jnp.where(ki != 0.0, voltage / jnp.where(ki != 0.0, ki, 1.0), 0.0)
-        return jnp.concatenate([body, integral])
+        """BODY and the integrals that hold its speeds (:func:`cruise_integral`): the integrators of a base that
+        has been cruising at them."""
+        return jnp.concatenate([body, cruise_integral(self.params, self.driver, velocity(body))])
 
     def observe(self, x: Array) -> Array:
         return x[: len(BODY)]

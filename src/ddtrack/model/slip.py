@@ -194,13 +194,15 @@ def contact_stiffness(
     slip_speed: float,
     caster: float = math.inf,
     motor: DCMotor | None = None,
+    speed_gain: float = 0.0,
 ) -> float:
     """An upper estimate of the fastest decay rate [1/s] of the slip plant, from nominal (float) numbers.
 
     Near zero slip the contact is a damper of rate mu N / eps_s on the slip velocities G z, z = (u, w, r, phi_dot_R,
     phi_dot_L), so its fastest mode is (mu N / eps_s) lambda_max(M_z^-1 G^T G), M_z the mass matrix of z (yaw about
     A). Added to it: the wheel friction's slope (b_w + tau_c / eps_f) / J_w and the back-EMF's eta k_t k_e / (R_a J_w)
-    (a wheel on the torque-speed curve), each acting on a wheel's spin alone.
+    (a wheel on the torque-speed curve), each acting on a wheel's spin alone; a PI wheel-speed loop of proportional
+    gain ``speed_gain`` k_p [V s/rad] adds eta k_t k_p / (R_a J_w) (model.md §1.10, the velocity-driven variant).
     """
     m, d, inertia = float(params.mass), float(params.com_offset), float(params.inertia)
     radius, half, spin = float(params.wheel_radius), float(params.half_axle), float(params.wheel_inertia)
@@ -214,7 +216,8 @@ def contact_stiffness(
     rate = friction * normal / slip_speed * float(np.max(modes.real))
     rate += (float(params.viscous_friction) + float(params.coulomb_friction) / float(params.friction_smoothing)) / spin
     if motor is not None:
-        rate += float(motor.efficiency * motor.torque_constant * motor.back_emf / motor.resistance) / spin
+        gain = float(motor.back_emf) + speed_gain  # the voltage falls with the wheel's speed at slope k_e + k_p
+        rate += float(motor.efficiency * motor.torque_constant / motor.resistance) * gain / spin
     return rate
 
 
@@ -258,10 +261,33 @@ def slip_plant_model(
     ``scheme`` forces ``"rk4"`` (with the steps the stability rule needs) or ``"rosenbrock"``. Raises ValueError for
     J_w <= 0 or a caster not beyond the centre of mass (here and for every drawn robot).
     """
+    l_c, chosen, steps = slip_integration(nominal, friction, slip_speed, caster, motor, period, substeps, scheme)
+
+    def plant_model(params: RobotParams) -> SlipPlant:
+        check_drawn(params, l_c)  # a drawn robot too
+        mu, eps, held_caster = broadcast_like(params, (friction, slip_speed, l_c))
+        return SlipPlant(params, mu, eps, held_caster, broadcast_like(params, motor), chosen, steps)
+
+    return plant_model
+
+
+def slip_integration(
+    nominal: RobotParams,
+    friction: float,
+    slip_speed: float,
+    caster: float | None,
+    motor: DCMotor | None,
+    period: float,
+    substeps: int,
+    scheme: str | None,
+    speed_gain: float = 0.0,
+) -> tuple[float, str, int]:
+    """(l_c, scheme, sub-steps) of a slip plant for the ``nominal`` robot (floats), checked as
+    :func:`slip_plant_model` says; ``speed_gain`` the proportional gain of a PI wheel-speed loop, if any."""
     require_wheel_inertia(nominal)
     l_c = math.inf if caster is None else float(caster)
     _check_caster(nominal, l_c)
-    stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor)
+    stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor, speed_gain)
     chosen, steps = choose_integration(stiffness, period, substeps)
     if scheme is not None and scheme != chosen:  # forced: with the steps the rule gives that scheme
         chosen = scheme
@@ -269,17 +295,19 @@ def slip_plant_model(
             steps = max(substeps, math.ceil(period / ROSENBROCK_STEP - 1e-9))
         else:
             steps = max(substeps, _rk4_steps(stiffness, period))
+    return l_c, chosen, steps
 
-    def plant_model(params: RobotParams) -> SlipPlant:
-        if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(params)):
-            require_wheel_inertia(params)  # a drawn robot too; traced parameters cannot be checked
-            _check_caster(params, l_c)
-        batch = jnp.shape(params.mass)
-        like = partial(_broadcast, batch)
-        held = None if motor is None else jax.tree_util.tree_map(like, motor)
-        return SlipPlant(params, like(friction), like(slip_speed), like(l_c), held, chosen, steps)
 
-    return plant_model
+def check_drawn(params: RobotParams, caster: float) -> None:
+    """:func:`slip_plant_model`'s checks on a drawn robot, unless its parameters are traced (they cannot be)."""
+    if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(params)):
+        require_wheel_inertia(params)
+        _check_caster(params, caster)
+
+
+def broadcast_like(params: RobotParams, value: Any) -> Any:
+    """``value`` (a float or a pytree of them) with every leaf broadcast to the parameters' leading batch shape."""
+    return jax.tree_util.tree_map(partial(_broadcast, jnp.shape(params.mass)), value)
 
 
 def _rk4_steps(stiffness: float, period: float) -> int:

@@ -37,7 +37,7 @@ from .baseline_configs import (
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
 from .motor_configs import lag_plant, motor_torque_plant, motor_velocity_plant
-from .slip_configs import slip_plant_config
+from .slip_configs import slip_plant_config, slip_velocity_plant_config
 from .trajectory_configs import (
     CircleTrajectory,
     FigureEightTrajectory,
@@ -474,6 +474,13 @@ register_plant(
     "slip",
     slip_plant_config,
     summary="The robot on a floor of finite grip, its wheels free to slip (needs wheel_inertia > 0).",
+    reads_scenario=True,
+)
+register_plant(
+    "slip_velocity",
+    slip_velocity_plant_config,
+    summary="The robot's motors under a PI wheel-speed loop on a floor of finite grip: (v, omega) commands, "
+    "wheels free to slip.",
     reads_scenario=True,
 )
 register_plant(

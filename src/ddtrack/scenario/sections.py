@@ -144,7 +144,8 @@ class PlantConfig(_Section):
         description=(
             "The plant that simulates the true robot, by name (`ddtrack list plants`): 'dynamic' is the "
             "Lagrangian robot driven by wheel torques; 'slip' the same robot on a floor of finite grip "
-            "(plant.floor_friction, plant.slip_speed, plant.caster_position)."
+            "(plant.floor_friction, plant.slip_speed, plant.caster_position); 'slip_velocity' that floor under the "
+            "preset's motors and the plant.velocity_pi loop, for (v, omega) commands."
         ),
     )
     mass: Positive | None = Field(None, description="True total mass m [kg].")
@@ -166,8 +167,9 @@ class PlantConfig(_Section):
     velocity_pi: tuple[NonNegative, NonNegative] = Field(
         (2.0, 50.0),
         description=(
-            "[kp [V s/rad], ki [V/rad]] of the wheel-speed PI loop of model 'motor_velocity'; an assumed tuning: "
-            "on a TurtleBot3 Burger driving straight its poles are real, -14 and -176 1/s. Tune it to your board."
+            "[kp [V s/rad], ki [V/rad]] of the wheel-speed PI loop of models 'motor_velocity' and 'slip_velocity'; "
+            "an assumed tuning: on a TurtleBot3 Burger driving straight its poles are real, -14 and -176 1/s. Tune it "
+            "to your board."
         ),
     )
     floor_friction: Positive = Field(
@@ -175,23 +177,25 @@ class PlantConfig(_Section):
         le=3.0,
         description=(
             "Friction coefficient of the floor (tyre on floor, 0.3 to 1.0 indoors): a run that needs more grip is "
-            "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor). Model 'slip' "
-            "uses it as its friction coefficient mu."
+            "flagged (metrics mu_required_max, time_above_floor_mu; warning friction_exceeds_floor). Models 'slip' "
+            "and 'slip_velocity' use it as their friction coefficient mu."
         ),
     )
 
     slip_speed: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
         1e-2,
         description=(
-            "Slip speed eps_s [m/s] of model 'slip' (the floor's grip is plant.floor_friction): friction is fully "
-            "developed once a wheel's contact slides faster than this; smaller is closer to perfect grip, and stiffer."
+            "Slip speed eps_s [m/s] of models 'slip' and 'slip_velocity' (the floor's grip is plant.floor_friction): "
+            "friction is fully developed once a wheel's contact slides faster than this; smaller is closer to perfect "
+            "grip, and stiffer."
         ),
     )
     caster_position: Annotated[float, Field(ge=-5.0, le=5.0)] | None = Field(
         None,
         description=(
-            "Body x l_c [m] of the frictionless caster, on the side of the centre of mass, for model 'slip': the "
-            "drive wheels carry m g (1 - d / l_c) / 2 each. Default the [robot] preset's, else none (m g / 2)."
+            "Body x l_c [m] of the frictionless caster, on the side of the centre of mass, for models 'slip' and "
+            "'slip_velocity': the drive wheels carry m g (1 - d / l_c) / 2 each. Default the [robot] preset's, else "
+            "none (m g / 2)."
         ),
     )
 

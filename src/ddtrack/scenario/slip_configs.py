@@ -1,9 +1,12 @@
-"""``[plant] model = "slip"``: the scenario's true robot on a floor of finite grip (model.md §1.10).
+"""``[plant] model = "slip"`` and ``"slip_velocity"``: the scenario's true robot on a floor of finite grip (model.md
+§1.10).
 
 The floor's friction coefficient is ``plant.floor_friction``, its slip speed ``plant.slip_speed``; the caster is
 ``plant.caster_position`` or the ``[robot] preset``'s. A preset with a motor drives the wheels through its
 current-controlled driver (back-EMF bounds their spin); otherwise the torques apply as commanded, within
-max_torque. The integration scheme and sub-steps are chosen once from the nominal true robot.
+max_torque. ``slip_velocity`` drives the preset's motors with the ``plant.velocity_pi`` wheel-speed loop instead, so
+it takes (v, omega) commands and needs a preset with a motor. The integration scheme and sub-steps are chosen once
+from the nominal true robot.
 """
 
 from __future__ import annotations
@@ -11,9 +14,11 @@ from __future__ import annotations
 from typing import Any
 
 from ..errors import ConfigError
-from ..model import DCMotor, RobotParams
+from ..model import DCMotor, RobotParams, VelocityDriver
 from ..model.motor_plants import motor_from_datasheet
 from ..model.slip import SlipPlant, slip_plant_model
+from ..model.slip_velocity import SlipVelocityPlant, slip_velocity_model
+from .motor_configs import scenario_motor
 
 
 def _preset(scenario: Any) -> Any:
@@ -30,7 +35,8 @@ def slip_options(scenario: Any) -> dict[str, Any]:
     if nominal.wheel_inertia <= 0.0:
         raise ConfigError(
             "plant.wheel_inertia",
-            "model 'slip' needs wheels with spin inertia J_w > 0: a massless wheel beyond grip spins up without bound",
+            f"model '{scenario.plant.model}' needs wheels with spin inertia J_w > 0: a massless wheel beyond grip "
+            "spins up without bound",
             "set plant.wheel_inertia (or robot.wheel_inertia) > 0 [kg m^2], e.g. the wheel plus N^2 J_rotor",
         )
     caster = scenario.plant.caster_position
@@ -59,6 +65,19 @@ def slip_options(scenario: Any) -> dict[str, Any]:
 def slip_plant_config(params: RobotParams, scenario: Any) -> SlipPlant:
     """The drawn robot ``params`` (alone or a batch) on the scenario's floor (model.md §1.10)."""
     model = slip_plant_model(scenario.plant_params(), **slip_options(scenario))
+    try:
+        return model(params)
+    except ValueError as exc:  # the nominal robot passed: a random draw crossed the line
+        raise ConfigError("randomize", f"a drawn robot: {exc}", "narrow the [randomize] draws") from None
+
+
+def slip_velocity_plant_config(params: RobotParams, scenario: Any) -> SlipVelocityPlant:
+    """The drawn robot ``params`` on the scenario's floor, its preset's motors under the ``plant.velocity_pi`` loop
+    (model.md §1.10); a ConfigError naming ``plant.model`` if the preset has no motor."""
+    driver = VelocityDriver(scenario_motor(scenario), *scenario.plant.velocity_pi)
+    options = slip_options(scenario)
+    del options["motor"]  # the loop drives the preset's motor
+    model = slip_velocity_model(scenario.plant_params(), driver, **options)
     try:
         return model(params)
     except ValueError as exc:  # the nominal robot passed: a random draw crossed the line
