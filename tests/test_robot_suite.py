@@ -14,15 +14,13 @@ import pyarrow.parquet as pq
 import pytest
 
 from ddtrack.metrics import pooled_improvement
+from ddtrack.robot_board import paired, ranking_agreement, robot_board
 from ddtrack.robot_suite import (
     ENTRY,
     ROBOTS,
     RobotSuite,
     cells,
-    paired,
     plan_robot_suite,
-    ranking_agreement,
-    robot_board,
     run_robot_suite,
 )
 from ddtrack.robots import PRESETS
@@ -74,13 +72,14 @@ def test_cells_a_robot_cannot_express_are_left_out_and_say_why():
     assert why[("paper", "backstepping", "floor_mu_0.4")] == "its model has no floor"
     ran = {(c["robot"], c["controller"], c["condition"]) for c in run}
     assert not ran & set(why)
-    assert len(run) == 2 * (2 * 6 * 2 + 5 + 4)  # two paths x (Burger, Waffle: 6 conditions x 2 laws; paper 5; Pioneer 4)
+    assert len(run) == 2 * (2 * 6 * 2 + 5 + 4)  # 2 paths x (Burger, Waffle: 6 conditions x 2 laws; paper 5; Pioneer 4)
 
 
 def test_bad_controller_names_are_refused_before_anything_runs(tmp_path):
     out = tmp_path / "bench"
     done = subprocess.run(
-        [sys.executable, "-m", "ddtrack", "bench", "--suite", "robots", "--controllers", "backsteping", "--out", str(out)],
+        [sys.executable, "-m", "ddtrack", "bench", "--suite", "robots", "--controllers", "backsteping"]
+        + ["--out", str(out)],
         capture_output=True,
         text=True,
         timeout=300,
