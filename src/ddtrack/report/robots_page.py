@@ -125,10 +125,10 @@ def _agreement_section(agreement: Mapping[str, Mapping[str, Any]]) -> Section:
     rows = tuple(
         (
             str(robot),
+            ", ".join(str(c) for c in a["controllers"]),
+            str(len(a["controllers"])),
             fmt(a["tau"], 3),
             fmt(a["p_value"], 3),
-            str(len(a["controllers"])),
-            ", ".join(str(c) for c in a["controllers"]),
         )
         for robot, a in agreement.items()
     )
@@ -142,11 +142,11 @@ def _agreement_section(agreement: Mapping[str, Mapping[str, Any]]) -> Section:
     )
     table = Table(
         "agreement-table",
-        ("robot", "Kendall's tau", "p", "controllers", "shared controllers"),
+        ("robot", "controllers both ran", "n", "Kendall's tau", "p"),
         rows,
         caption="Kendall's tau between the nominal ranking on the paper's robot and on each other robot, over the "
         "controllers both ran (1: same order, 0: unrelated, -1: reversed).",
-        left=1,
+        left=2,
     )
     return Section("agreement", "Does the paper robot's ranking survive?", notes=notes, tables=(table,) if rows else ())
 
