@@ -557,3 +557,107 @@ def test_page_header_says_what_when_and_which_version(reproduce_folder):
     header = html.split("</header>")[0]
     assert "a reproduce folder" in header and "2030-01-02 03:04 UTC" in header and version() in header
     assert version() != "unknown"  # the installed distribution's version, as `ddtrack --version` prints it
+
+
+# --- the robots suite (ddtrack bench --suite robots) -------------------------------------------------------------
+
+ROBOT_LAWS = ["backstepping", "kinematic_backstepping"]
+
+
+@pytest.fixture(scope="module")
+def robots_folder(tmp_path_factory):
+    """A tiny finished robots suite, the real runner: the paper's robot takes torques only, the Pioneer cmd_vel
+    only, so each law is left out on one robot."""
+    from distributed import Client
+
+    from ddtrack.cluster import local_cluster
+    from ddtrack.robot_suite import RobotSuite, run_robot_suite
+
+    out = tmp_path_factory.mktemp("report_robots")
+    suite = RobotSuite(
+        robots=("paper", "pioneer_3dx"),
+        trajectories=("figure_eight",),
+        conditions=("nominal", "latency_50ms"),
+        seeds=2,
+        overrides=tuple(SHORT[:2]),
+    )
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        run_robot_suite(suite, ROBOT_LAWS, out, client)
+    write_report(out)
+    return out
+
+
+def _cell_mean(text: str) -> float:
+    return float(text.split()[0])
+
+
+@pytest.mark.slow
+def test_robots_report_in_chromium(robots_folder, chromium, tmp_path):
+    html = robots_folder / "report.html"
+    summary = json.loads((robots_folder / "leaderboard.json").read_text())
+    _assert_self_contained(html.read_text())
+    page, graphics = _load(chromium, html, browser.screenshot_path(tmp_path, "report_robots.png"))
+    assert {"fig-conditions", "fig-distributions"} <= {g["id"] for g in graphics}
+    labels, values = (page.locator(f".card .{part}").all_text_contents() for part in ("label", "value"))
+    cards = dict(zip(labels, values, strict=True))
+    assert cards["robots"] == "2" and cards["controllers"] == "2" and cards["runs"] == str(summary["runs"])
+    assert cards["errors"] == "0" and cards["failures"] == "0"
+    for i, (robot, board) in enumerate(summary["boards"].items()):
+        assert page.locator(f"section#robot-{i} h2").inner_text() == robot
+        head = page.locator(f"table#board-{i} thead th").all_inner_texts()
+        assert head == ["rank", "controller", "nominal", "latency_50ms", "all", "failures", "implausible"]
+        rows = page.locator(f"table#board-{i} tbody tr").all()
+        assert len(rows) == len(board) == 1  # the other law takes no command this robot takes
+        for row, entry in zip(rows, board, strict=True):
+            texts = row.locator("td").all_inner_texts()
+            assert texts[1] == entry["controller"]
+            for text, key in zip(texts[2:5], ("nominal", "latency_50ms", "all"), strict=True):
+                assert _cell_mean(text) == pytest.approx(entry[key]["mean"], rel=5e-4)
+                low, high = re.search(r"\[(\S+), (\S+)\]", text).groups()
+                assert float(low) == pytest.approx(entry[key]["ci_low"], rel=5e-4)
+                assert float(high) == pytest.approx(entry[key]["ci_high"], rel=5e-4)
+            assert texts[5:] == [f"{entry['failures']}/{entry['runs']}", f"{entry['implausible']}/{entry['runs']}"]
+    left = [row.locator("td").all_inner_texts() for row in page.locator("table#left-out-table tbody tr").all()]
+    assert left == [
+        ["paper", "kinematic_backstepping", "nominal, latency_50ms", "takes no velocity commands"],
+        ["pioneer_3dx", "backstepping", "nominal, latency_50ms", "takes no torque commands"],
+    ]
+    assert len(summary["left_out"]) == 4
+    # two controllers, one per robot: no ranking to compare and no NN-adaptive law, each said so
+    assert "no ranking" in page.locator("section#agreement").inner_text()
+    assert "nothing to compare" in page.locator("section#nn-adaptive").inner_text()
+
+
+def test_a_robots_folder_is_detected_as_such(robots_folder):
+    from ddtrack.report.robots_page import KIND_NAME
+
+    assert detect_kind(robots_folder) == "bench"  # `ddtrack bench --suite robots`: the leaderboard says which suite
+    html = render(robots_folder)
+    page = Page(html)
+    assert KIND_NAME in html.split("</header>")[0] and "leaderboard-table" not in page.ids
+    assert {"board-0", "board-1", "left-out-table", "suite-table"} <= set(page.ids)
+    summary = json.loads((robots_folder / "leaderboard.json").read_text())
+    assert page.rows("board-0", html) == len(summary["boards"]["paper"])
+
+
+def test_a_robots_page_keeps_user_strings_text(robots_folder, tmp_path):
+    """The real folder with a robot and a controller renamed to the payload (in leaderboard.json and
+    results.parquet): printed as text in the tables and in the SVG matplotlib draws."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "robots"
+    shutil.copytree(robots_folder, out)
+    quoted = json.dumps(PAYLOAD)[1:-1]
+    text = (out / "leaderboard.json").read_text()
+    (out / "leaderboard.json").write_text(text.replace("pioneer_3dx", quoted).replace("kinematic_backstepping", quoted))
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    for row in rows:
+        for key in ("controller", "label.robot"):
+            row[key] = PAYLOAD if row[key] in ("pioneer_3dx", "kinematic_backstepping") else row[key]
+    pq.write_table(pa.Table.from_pylist(rows), out / "results.parquet")
+    html = render(out)
+    page = _assert_self_contained(html)
+    assert SCRIPT not in html and "<img src=x" not in html
+    assert {"td", "h2"} <= {tag for tag, text in page.text if PAYLOAD in text}
+    assert any(tag == "text" and text.startswith(SCRIPT) for tag, text in page.text)

@@ -1,4 +1,5 @@
-"""``ddtrack report DIR``: one self-contained HTML page for a run, ``reproduce``, ``mc`` or ``bench`` folder.
+"""``ddtrack report DIR``: one self-contained HTML page for a run, ``reproduce``, ``mc`` or ``bench`` folder (the
+standard suites' leaderboard, or ``--suite robots``' board per robot).
 
 The folder's kind is read from the files it holds (:data:`KINDS`). The figures are drawn again from the
 folder's data (``timeseries.parquet``, ``runs.parquet``, ``results.parquet``, ``table1.json``) with

@@ -1,4 +1,5 @@
-"""The page of a ``ddtrack bench`` folder: the leaderboard, the cells and the robustness map."""
+"""The page of a ``ddtrack bench`` folder: the leaderboard, the cells and the robustness map (a ``--suite robots``
+folder's page is :mod:`.robots_page`'s)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from ._page import (
     plot_distributions,
     svg,
 )
+from .robots_page import _robots_page, is_robots_summary
 from .run_page import (
     _written,
 )
@@ -39,6 +41,8 @@ BENCH_COLUMNS = ("controller", "seed", "status", "e_tr_mean", "label.study", "la
 def _bench_page(folder: Path) -> dict:
     path = folder / "leaderboard.json"
     summary = _read_json(path)
+    if is_robots_summary(summary):  # `bench --suite robots`: a board per robot, its own page
+        return _robots_page(folder, summary)
     board = _field(summary, "leaderboard", path=path)
     suite = _field(summary, "suite", path=path)
     table = _read_table(folder / "results.parquet", BENCH_COLUMNS)

@@ -87,7 +87,8 @@ def render(folder: Path, *, now: dt.datetime | None = None) -> str:
         cards=tuple(parts["cards"]),
         sections=tuple(parts["sections"]),
     )
-    return environment().get_template("report.html.j2").render(page=page, kind_name=DESCRIPTIONS[kind])
+    kind_name = parts.get("kind_name", DESCRIPTIONS[kind])  # a builder may name its folder more closely
+    return environment().get_template("report.html.j2").render(page=page, kind_name=kind_name)
 
 
 def write_report(folder: Path, *, out: Path | None = None) -> Path:
