@@ -103,7 +103,7 @@ class _InnerLoopConfig(_ControllerSection):
         """``outer`` over the inner loop, or alone as a velocity command (inner = "none", model.md §2.7)."""
         if self.inner == "none":
             return VelocityOutput(outer)
-        return self.over_inner(outer, nominal, control_period)
+        return Cascade(outer, self.build_inner(nominal, control_period))
 
     def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
         """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6); inner = "none"
