@@ -111,7 +111,7 @@ def build(
             sensing=scenario.sensing.build(sim.control_period),
         )
     except ConfigError as exc:  # a wrong pairing that the shared inner loop's key fixes names that key
-        if exc.field != "plant.model" or "inner" not in type(config).model_fields:
+        if exc.field != "plant.model" or "inner" not in getattr(type(config), "model_fields", {}):
             raise
         other = "none" if output == "torque" else "computed_torque"
         fix = f'set controller.inner = "{other}"' + (
