@@ -9,7 +9,7 @@ from conftest import SCENARIOS
 
 from ddtrack import load_scenario
 from ddtrack.errors import ConfigError
-from ddtrack.runner import prepare, run
+from ddtrack.runner import prepare, run, run_setup
 
 SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]"]
 BURGER = SCENARIOS / "burger_cmd_vel_figure8.toml"
@@ -79,10 +79,10 @@ def test_nn_model_jacobians_need_an_inner_loop():
 
 
 def test_nn_adaptive_over_cmd_vel_identifies_the_true_base():
-    nn = ["controller.inner=none", "controller.identification_duration=10", "controller.epochs=5"]
+    nn = ["controller.inner=none", "controller.identification_duration=5", "controller.epochs=3"]
     scenario = load_scenario(BURGER, overrides=[*SHORT, *nn], controller="nn_adaptive_backstepping")
-    setup, _ = prepare(scenario)
-    result = run(scenario)
+    setup, draws = prepare(scenario)
+    result = run_setup(scenario, setup, draws)
     assert int(result.status) == 0 and e_tr(result).max() < 0.15
     # the same identification on the ideal unicycle (the dynamic plant under velocity commands) learns another map:
     # the Burger's PI loop and 50 ms latency are in the data the emulator learned from
