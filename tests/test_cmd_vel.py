@@ -13,6 +13,8 @@ from ddtrack.runner import prepare, run, run_setup
 
 SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]"]
 BURGER = SCENARIOS / "burger_cmd_vel_figure8.toml"
+#: the Burger's PI wheel-speed loop alone (its latency and odometry are the NN test's; they only slow compiling here)
+BURGER_BASE = ["sensing.actuation_delay=0", "sensing.odometry=false", "sensing.encoder_counts=0"]
 #: the Pioneer 3-DX's identified lags (Martins et al.) on the 6 m figure eight, which starts on the robot's pose
 PIONEER_LAG = ["robot.preset=pioneer_3dx", "plant.model=lag"]
 
@@ -34,15 +36,17 @@ def test_backstepping_without_inner_loop_is_kinematic_backstepping():
 
 @pytest.mark.parametrize("kind", ["backstepping", "ltv_lqr", "regulated_pure_pursuit"])
 @pytest.mark.parametrize(
-    ("path", "plant"), [(BURGER, []), (SCENARIOS / "figure_eight.toml", PIONEER_LAG)], ids=["motor_velocity", "lag"]
+    ("path", "plant"),
+    [(BURGER, BURGER_BASE), (SCENARIOS / "figure_eight.toml", PIONEER_LAG)],
+    ids=["motor_velocity", "lag"],
 )
 def test_velocity_laws_drive_velocity_commanded_bases(kind, path, plant):
     scenario = load_scenario(path, overrides=[*SHORT, *plant, "controller.inner=none"], controller=kind)
     result = run(scenario)
     assert int(result.status) == 0
     errors = e_tr(result)
-    # both start on the reference at rest: the base's lag (and the Burger's 50 ms latency) costs centimetres while
-    # it speeds up to the reference's 0.3-0.5 m/s, and the laws then close the gap to below 5 cm
+    # both start on the reference at rest: the base's lag costs centimetres while it speeds up to the reference's
+    # 0.1-0.5 m/s (measured: at most 4 cm on the Burger, 8.5 cm on the Pioneer), and the laws close the gap below 5 cm
     assert errors.max() < 0.15 and errors[-1] < 0.05, (errors.max(), errors[-1])
 
 
