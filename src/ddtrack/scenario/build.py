@@ -20,6 +20,10 @@ from .registry import controller_kind, controller_output, plant_kind
 # --- runtime objects -------------------------------------------------------------------------------
 
 
+class InputMismatch(ConfigError):
+    """The plant does not take what the controller outputs (torques or velocities)."""
+
+
 @dataclass(frozen=True)
 class Setup:
     """Everything :func:`ddtrack.sim.simulate` needs, built from a scenario (randomness not yet drawn)."""
@@ -41,7 +45,7 @@ class Setup:
         try:  # a wrong pairing is named here, before anything is simulated
             require_matching_input(self.plant, self.controller)
         except ValueError as exc:
-            raise ConfigError("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
+            raise InputMismatch("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
 
     @property
     def plant(self) -> Plant:
@@ -110,8 +114,8 @@ def build(
             plant_model=plant_kind(scenario.plant.model).model(scenario),
             sensing=scenario.sensing.build(sim.control_period),
         )
-    except ConfigError as exc:  # a wrong pairing that the shared inner loop's key fixes names that key
-        if exc.field != "plant.model" or "inner" not in getattr(type(config), "model_fields", {}):
+    except InputMismatch as exc:  # a wrong pairing that the shared inner loop's key fixes names that key
+        if "inner" not in getattr(type(config), "model_fields", {}):
             raise
         other = "none" if output == "torque" else "computed_torque"
         fix = f'set controller.inner = "{other}"' + (
