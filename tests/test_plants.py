@@ -105,7 +105,7 @@ def test_a_controller_the_plant_cannot_take_is_refused_when_assembled():
     setup, _ = prepare(scenario())
     with pytest.raises(ddtrack.ConfigError, match="Backstepping outputs velocity commands but DynamicPlant takes"):
         dataclasses.replace(setup, controller=ddtrack.controllers.Backstepping())
-    with pytest.raises(ddtrack.ConfigError, match="plant.model: Cascade outputs torque commands but KinematicPlant"):
+    with pytest.raises(ddtrack.ConfigError, match="controller.inner: Cascade outputs torque commands but Kinematic"):
         prepare(scenario("plant.model=unicycle"))
     with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: unknown plant 'wheel_angle'.*'wheel_angles'"):
         scenario("plant.model=wheel_angle")

@@ -123,5 +123,5 @@ def test_the_reference_has_every_key_with_its_unit():
         elif "$ref" in node:
             assert f"## [{section}]" in text
     assert "| `mass` | float | 10.0 | > 0.0 | Total mass m [kg]. |" in text
-    assert '| `inner` | `"computed_torque"` \\| `"pd"` | "computed_torque" |  | Inner (dynamic) loop. |' in text
+    assert '| `inner` | `"computed_torque"` \\| `"pd"` \\| `"none"` | "computed_torque" |  | Inner (dynamic' in text
     assert "| `std` | [float, float] | required | each >= 0.0 | [right, left] standard deviation [N m]. |" in text

@@ -1,7 +1,8 @@
 """The identification phase of the NN-adaptive controller (model.md §3.7, "N_c = 100 repeat cycle").
 
 Before an experiment, with its own seed: run the fixed-gain backstepping controller on an exciting
-reference with a small command dither on the *true* plant, collect the transitions
+reference with a small command dither on the *true* plant (the scenario's plant behind its sensing, under the
+controller's inner loop or, for ``inner = "none"``, commanded in velocity), collect the transitions
 (z_k = [nu_c(k), nu(k)], body-frame increment of q_k -> q_k+1), and train the emulator for N_c
 shuffled epochs of per-sample backpropagation with momentum.
 """
@@ -15,10 +16,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from ._pytree import FloatVector
-from .controllers import Backstepping, Cascade, Dithered, Emulator
+from .controllers import Backstepping, Cascade, Dithered, Emulator, VelocityOutput
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
-from .model import DynamicPlant, MeasurementNoise, RobotParams, WheelDisturbance
+from .model import DynamicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .sim import Draws, simulate
 from .trajectories import SampledTrajectory, unicycle_reference
 
@@ -68,8 +69,8 @@ def exciting_reference(
 
 
 def collect(
-    plant: RobotParams,
-    inner: object,
+    plant: RobotParams | Plant,
+    inner: object | None,
     emulator: Emulator,
     key: Array,
     *,
@@ -83,7 +84,9 @@ def collect(
     noise: MeasurementNoise,
     reference_scale: tuple[float, float] = (1.0, 1.0),
 ) -> tuple[Array, Array]:
-    """Run the identification experiment; return inputs z (n, n_in) and targets (n, 3) [physical units]."""
+    """Run the identification experiment on ``plant`` (a plant, or the parameters of the dynamic plant) under
+    ``inner`` (None: the dithered law's command is the plant's velocity input); return inputs z (n, n_in) and
+    targets (n, 3) [physical units] of the true state."""
     trajectory = exciting_reference(duration, control_period, reference_scale)
     outer = Dithered(
         Backstepping(kx=gains[0], ky=gains[1], ktheta=gains[2], max_velocity=limits[0], max_yaw_rate=limits[1]),
@@ -95,8 +98,8 @@ def collect(
     ref0 = trajectory(0.0)
     x0 = jnp.stack([ref0.x, ref0.y, ref0.theta, 0.0, 0.0])
     result = simulate(
-        DynamicPlant(plant),
-        Cascade(outer, inner),
+        DynamicPlant(plant) if isinstance(plant, RobotParams) else plant,
+        VelocityOutput(outer) if inner is None else Cascade(outer, inner),
         trajectory,
         x0,
         draws,
@@ -155,8 +158,8 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
 
 
 def identify(
-    plant: RobotParams,
-    inner: object,
+    plant: RobotParams | Plant,
+    inner: object | None,
     emulator: Emulator,
     key: Array,
     *,
@@ -174,8 +177,9 @@ def identify(
     noise: MeasurementNoise = MeasurementNoise(),
     reference_scale: tuple[float, float] = (1.0, 1.0),
 ) -> Identification:
-    """Collect identification data on ``plant`` and train ``emulator`` on it (model.md §3.7 schedule, step 1);
-    ``reference_scale`` is :func:`identification_scale`'s (k_v, k_omega)."""
+    """Collect identification data on ``plant`` (a plant, or the dynamic plant's parameters) under ``inner``
+    (None: velocity commands) and train ``emulator`` on it (model.md §3.7 schedule, step 1); ``reference_scale``
+    is :func:`identification_scale`'s (k_v, k_omega)."""
     k_data, k_train = jax.random.split(key)
     z, targets = collect(
         plant,

@@ -149,29 +149,30 @@ def with_identification(
 ) -> Setup:
     """Pre-train the NN-adaptive controller's emulator on an identification run of the true plant
     (model.md §3.7), with the scenario's disturbance and noise, and hand it the trained network."""
-    outer = setup.controller.outer
+    outer, inner = setup.controller.outer, getattr(setup.controller, "inner", None)
     if result is None:  # as a batch of one, so that its bits equal its row in any batch's identification
-        inputs = (setup.plant_params, setup.controller.inner, outer.emulator, key, setup.disturbance, setup.noise)
-        result = row(vmap_runs(_identifier(scenario))(*stack([inputs])), 0)
+        inputs = (setup.plant_params, inner, outer.emulator, key, setup.disturbance, setup.noise)
+        result = row(vmap_runs(_identifier(scenario, setup))(*stack([inputs])), 0)
     controller = dataclasses.replace(setup.controller, outer=dataclasses.replace(outer, emulator=result.emulator))
     return dataclasses.replace(setup, controller=controller, identification=result)
 
 
-def _identifier(scenario: Scenario) -> Callable[..., Identification]:
-    """identify(plant, inner, emulator, key, disturbance, noise) with the scenario's settings bound."""
+def _identifier(scenario: Scenario, setup: Setup) -> Callable[..., Identification]:
+    """identify(plant parameters, inner, emulator, key, disturbance, noise) with the scenario's settings bound, on
+    the plant the controller will drive (``setup.plant_for``: the scenario's plant behind its sensing)."""
     config, sim = scenario.controller, scenario.simulation
     assert isinstance(config, NNAdaptiveConfig), "only the NN-adaptive controller identifies its plant"
 
     def run_identification(
         plant: RobotParams,
-        inner: TorqueLaw,
+        inner: TorqueLaw | None,
         emulator: Emulator,
         key: Array,
         disturbance: WheelDisturbance,
         noise: MeasurementNoise,
     ) -> Identification:
         return identify(
-            plant,
+            setup.plant_for(plant, jax.random.fold_in(key, 1)),  # the fix's noise, if any: off the identification key
             inner,
             emulator,
             key,
@@ -215,12 +216,12 @@ def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draw
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
-        identify_all = vmap_runs(_identifier(scenario))
+        identify_all = vmap_runs(_identifier(scenario, setup))
         found = identify_all(
             *shard_runs(
                 (
                     setup.plant_params,
-                    setup.controller.inner,
+                    getattr(setup.controller, "inner", None),
                     setup.controller.outer.emulator,
                     keys,
                     setup.disturbance,

@@ -33,7 +33,7 @@ from .errors import ConfigError
 from .metrics import window_mask
 from .outdir import atomic_write
 from .runner import prepare_batch
-from .scenario import Scenario, Setup, tunable_kinds
+from .scenario import Scenario, Setup, controller_output, tunable_kinds
 from .sim import Draws, simulate_batch
 
 #: the fields of the outer law that the tuned gains replace, in the scenario's ``gains`` order; the kinds whose
@@ -74,6 +74,13 @@ def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Proble
                 "--controller",
                 f"'{scenario.controller.kind}' has no tunable gains here",
                 f"tune one of: {', '.join(tunable)}",
+            )
+        if controller_output(scenario.controller) != "torque":  # the rollouts differentiate through the torque loop
+            raise ConfigError(
+                "controller.inner",
+                f"'{scenario.controller.kind}' outputs velocity commands here (inner = \"none\"): tune tunes gains "
+                "over the torque plant",
+                'tune it over an inner loop (inner = "computed_torque" or "pd")',
             )
     return [
         Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())

@@ -10,7 +10,7 @@ from .backstepping import (
     kanayama_command_rate,
     lyapunov,
 )
-from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw
+from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw, VelocityOutput
 from .dither import Dithered
 from .inner import ComputedTorque, WheelPD
 from .nn import MLP, Scales, init_mlp
@@ -43,6 +43,7 @@ __all__ = [
     "TorqueLaw",
     "VelocityCommand",
     "VelocityLaw",
+    "VelocityOutput",
     "WheelPD",
     "clamp_command",
     "cost_gradient",

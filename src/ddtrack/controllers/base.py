@@ -108,3 +108,26 @@ class Cascade:
             **inner_logs,
         }
         return tau, (outer_memory, inner_memory), logs
+
+
+@pytree_dataclass
+class VelocityOutput:
+    """An outer velocity law alone, its (v_c, omega_c) handed to the robot as its velocity command (ROS's cmd_vel):
+    ``[controller] inner = "none"`` (model.md §2.7). The strict cross term and nu_c's derivative have no inner loop
+    to enter, so they are dropped.
+
+    Logs: as :class:`Cascade`'s, ``v_cmd`` [m/s], ``omega_cmd`` [rad/s], ``saturated`` (1.0 when a velocity clamp
+    was active), plus the outer law's logs.
+    """
+
+    outer: Any
+    output_kind: ClassVar[str] = "velocity"  #: what the law hands the plant
+
+    def init(self, x0: Array, ref0: Reference, key: Array) -> Any:
+        return self.outer.init(x0, ref0, key)
+
+    def step(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[Array, Any, Logs]:
+        command, memory, outer_logs = self.outer.command(t, y, ref, memory)
+        memory = self.outer.observe(memory, command.saturated)
+        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated, **outer_logs}
+        return command.nu_c, memory, logs

@@ -79,7 +79,6 @@ from gymnasium import spaces
 from jax import Array
 
 from .._pytree import pytree_dataclass
-from ..controllers import Cascade
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
 from ..layout import pose, velocity
@@ -183,9 +182,9 @@ def _step(
     if gains_mode:
         gains = _gains(episode, action)
         controller = episode.controller
-        if not isinstance(controller, Cascade):  # a velocity output (kinematic backstepping): the law alone
+        if not hasattr(controller, "outer"):  # kinematic backstepping: the law alone is the controller
             controller = dataclasses.replace(controller, kx=gains[0], ky=gains[1], ktheta=gains[2])
-        else:
+        else:  # a Cascade, or a VelocityOutput (inner = "none")
             outer = dataclasses.replace(controller.outer, kx=gains[0], ky=gains[1], ktheta=gains[2])
             controller = dataclasses.replace(controller, outer=outer)
     else:

@@ -50,6 +50,7 @@ from .registry import PlantKind as PlantKind
 from .registry import TrajectoryConfig as TrajectoryConfig
 from .registry import controller_kind as controller_kind
 from .registry import controller_kinds as controller_kinds
+from .registry import controller_output as controller_output
 from .registry import kanayama_gains as kanayama_gains
 from .registry import kanayama_kinds as kanayama_kinds
 from .registry import plant_kind as plant_kind

@@ -11,6 +11,7 @@ from pydantic import Field, model_validator
 from ..controllers import (
     Backstepping,
     Cascade,
+    VelocityOutput,
 )
 from ..controllers.baselines import (
     MPPI,
@@ -34,7 +35,7 @@ from .controller_configs import PositiveTriple, _InnerLoopConfig, _KanayamaGains
 
 
 class LTVLQRConfig(_VelocityClamps, _InnerLoopConfig):
-    """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD inner loop."""
+    """LTV/LQR unicycle tracker (WPILib's LTVUnicycleController) over a computed-torque or PD loop, or as cmd_vel."""
 
     kind: Literal["ltv_lqr"]
     q_tolerance: PositiveTriple = Field(
@@ -65,11 +66,11 @@ class LTVLQRConfig(_VelocityClamps, _InnerLoopConfig):
             )
         return self
 
-    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade | VelocityOutput:
         """The controller; ``key`` is unused (nothing is drawn)."""
         outer = same_named(self, LTVUnicycleLQR, control_period=control_period)
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
-        return Cascade(outer, self.build_inner(nominal, control_period))
+        return self.over_inner(outer, nominal, control_period)
 
 
 class SlidingModeConfig(_VelocityClamps, _KanayamaGains):
@@ -167,11 +168,13 @@ class RegulatedPurePursuitConfig(_InnerLoopConfig):
             )
         return self
 
-    def build(self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory) -> Cascade:
+    def build(
+        self, nominal: RobotParams, control_period: float, key: jax.Array, *, trajectory: Trajectory
+    ) -> Cascade | VelocityOutput:
         """The controller searching ``trajectory`` for its carrot; ``key`` is unused (nothing is drawn)."""
         outer = same_named(self, RegulatedPurePursuit, trajectory=trajectory)
         # the same inner loops as backstepping, so the comparison is fair (docs/architecture.md)
-        return Cascade(outer, self.build_inner(nominal, control_period))
+        return self.over_inner(outer, nominal, control_period)
 
 
 class AdaptiveBacksteppingConfig(_VelocityClamps, _KanayamaGains):

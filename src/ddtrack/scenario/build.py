@@ -15,9 +15,13 @@ from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, Robot
 from ..sim import require_matching_input
 from ..trajectories import Trajectory
 from .document import Scenario
-from .registry import controller_kind, plant_kind
+from .registry import controller_kind, controller_output, plant_kind
 
 # --- runtime objects -------------------------------------------------------------------------------
+
+
+class InputMismatch(ConfigError):
+    """The plant does not take what the controller outputs (torques or velocities)."""
 
 
 @dataclass(frozen=True)
@@ -41,17 +45,24 @@ class Setup:
         try:  # a wrong pairing is named here, before anything is simulated
             require_matching_input(self.plant, self.controller)
         except ValueError as exc:
-            raise ConfigError("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
+            raise InputMismatch("plant.model", str(exc), "`ddtrack list plants` shows each plant's input") from None
 
     @property
     def plant(self) -> Plant:
         """What the run simulates: the true robot, ``plant_model(plant_params)``; for a kinematic controller, the
         true robot if it takes velocity commands (e.g. :class:`~ddtrack.model.LagPlant`), else the unicycle that
         applies (v, omega) at once (then [plant], [randomize] and [disturbance] have no effect)."""
-        robot = self.plant_model(self.plant_params)
+        return self.plant_for(self.plant_params, self.sensing_key)
+
+    def plant_for(self, params: RobotParams, sensing_key: Any = None) -> Plant:
+        """:attr:`plant` for the true robot's ``params`` and the fix's noise key ``sensing_key`` (e.g. the
+        NN-adaptive controller's identification run, on the plant its controller will drive)."""
+        robot = self.plant_model(params)
         if self.kinematic and robot.input_kind != "velocity":
-            return self.sensed(KinematicPlant())
-        return self.sensed(robot)
+            robot = KinematicPlant()
+        if self.sensing is None:
+            return robot
+        return self.sensing.wrap(robot, self.nominal, params, sensing_key)  # type: ignore[return-value]
 
     def sensed(self, plant: Plant) -> Plant:
         """``plant`` behind the scenario's ``[sensing]`` chain (:class:`~ddtrack.model.SensedPlant`), or as it is
@@ -82,25 +93,35 @@ def build(
         controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
     else:
         controller = config.build(nominal, sim.control_period, key)
-    built_output = getattr(controller, "output_kind", kind.output)
-    if built_output != kind.output:  # the registration and the class must agree on what the plant receives
+    output = controller_output(config)
+    built_output = getattr(controller, "output_kind", output)
+    if built_output != output:  # the registration (or the config) and the class must agree on what the plant receives
         raise TypeError(
-            f"controller kind {kind.name!r} is registered with output={kind.output!r}, but builds a "
-            f"{type(controller).__name__} whose output_kind is {built_output!r}"
+            f"controller kind {kind.name!r} is declared to output {output!r} (registered output={kind.output!r}), "
+            f"but builds a {type(controller).__name__} whose output_kind is {built_output!r}"
         )
-    return Setup(
-        nominal=nominal,
-        plant_params=plant_params if plant_params is not None else scenario.plant_params(),
-        controller=controller,
-        trajectory=trajectory,
-        x0=x0,
-        disturbance=scenario.disturbance.build(),
-        noise=scenario.noise.build(),
-        # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
-        kinematic=kind.output == "velocity" and scenario.plant.model == "dynamic",
-        plant_model=plant_kind(scenario.plant.model).model(scenario),
-        sensing=scenario.sensing.build(sim.control_period),
-    )
+    try:
+        return Setup(
+            nominal=nominal,
+            plant_params=plant_params if plant_params is not None else scenario.plant_params(),
+            controller=controller,
+            trajectory=trajectory,
+            x0=x0,
+            disturbance=scenario.disturbance.build(),
+            noise=scenario.noise.build(),
+            # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
+            kinematic=output == "velocity" and scenario.plant.model == "dynamic",
+            plant_model=plant_kind(scenario.plant.model).model(scenario),
+            sensing=scenario.sensing.build(sim.control_period),
+        )
+    except InputMismatch as exc:  # a wrong pairing that the shared inner loop's key fixes names that key
+        if "inner" not in getattr(type(config), "model_fields", {}):
+            raise
+        other = "none" if output == "torque" else "computed_torque"
+        fix = f'set controller.inner = "{other}"' + (
+            " to send (v_c, omega_c) as the velocity command (cmd_vel)" if other == "none" else " (wheel torques)"
+        )
+        raise ConfigError("controller.inner", exc.message, f"{fix}, or {exc.suggestion}") from None
 
 
 def to_toml_dict(scenario: Scenario) -> dict[str, Any]:

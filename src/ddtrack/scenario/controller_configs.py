@@ -21,6 +21,7 @@ from ..controllers import (
     ComputedTorque,
     Emulator,
     NNAdaptiveBackstepping,
+    VelocityOutput,
     WheelPD,
     emulator_scales,
     init_mlp,
@@ -73,22 +74,42 @@ class _InnerLoopConfig(_ControllerSection):
     """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md).
 
     The inner loop is computed torque (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level
-    controller meets the same dynamics layer.
+    controller meets the same dynamics layer; or none, the outer law's command going to a velocity-commanded
+    base as its cmd_vel (model.md §2.7).
     """
 
-    inner: Literal["computed_torque", "pd"] = Field("computed_torque", description="Inner (dynamic) loop.")
+    inner: Literal["computed_torque", "pd", "none"] = Field(
+        "computed_torque",
+        description=(
+            "Inner (dynamic) loop: computed torque (eq. 11), wheel PD, or none: the outer law's (v_c, omega_c) go "
+            "to the robot as its velocity command (cmd_vel)."
+        ),
+    )
     kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
     kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
     kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
 
     def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
-        """The inner loop on the ``nominal`` model, sampled every ``control_period`` [s]."""
+        """The inner loop on the ``nominal`` model, sampled every ``control_period`` [s] (not for inner = "none")."""
         if self.inner == "computed_torque":
             return ComputedTorque(nominal, kc=self.kc)
         return WheelPD(nominal, kp=self.kp, kd=self.kd, control_period=control_period)
 
+    def controller_output(self) -> Literal["torque", "velocity"]:
+        """What the built controller hands the plant: wheel torques, or (v, omega) without an inner loop."""
+        return "velocity" if self.inner == "none" else "torque"
+
+    def over_inner(self, outer: Any, nominal: RobotParams, control_period: float) -> Cascade | VelocityOutput:
+        """``outer`` over the inner loop, or alone as a velocity command (inner = "none", model.md §2.7)."""
+        if self.inner == "none":
+            return VelocityOutput(outer)
+        return Cascade(outer, self.build_inner(nominal, control_period))
+
     def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
-        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6)."""
+        """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6); inner = "none"
+        has no loop and so no bandwidth (a ValueError)."""
+        if self.inner == "none":
+            raise ValueError('inner = "none" has no inner loop and so no bandwidth')
         if self.inner == "computed_torque":
             return self.kc
         r2 = nominal.wheel_radius**2
@@ -107,20 +128,24 @@ class _KanayamaConfig(_VelocityClamps, _KanayamaGains, _InnerLoopConfig):
     @model_validator(mode="after")
     def _strict_needs_computed_torque(self) -> _KanayamaConfig:
         if self.strict and self.inner != "computed_torque":
-            raise FieldError("strict", 'strict = true needs inner = "computed_torque" (the cross term enters eq. 11)')
+            raise FieldError(
+                "strict",
+                f'strict = true needs inner = "computed_torque" (the cross term enters eq. 11), not "{self.inner}"',
+                'set strict = false, or inner = "computed_torque"',
+            )
         return self
 
 
 class BacksteppingConfig(_KanayamaConfig):
-    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21)."""
+    """Kanayama backstepping over a computed-torque or PD inner loop (paper eqs. 7, 11, 12, 21), or as cmd_vel."""
 
     kind: Literal["backstepping"]
 
-    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade | VelocityOutput:
         """The controller; ``key`` seeds whatever it draws at construction (nothing, for backstepping)."""
         kx, ky, ktheta = self.gains
         outer = same_named(self, Backstepping, kx=kx, ky=ky, ktheta=ktheta)
-        return Cascade(outer, self.build_inner(nominal, control_period))
+        return self.over_inner(outer, nominal, control_period)
 
 
 InnerLoopConfig = _InnerLoopConfig  #: public name, for a plugin's config over the shared inner loop (docs/plugins.md)
@@ -190,6 +215,13 @@ class NNAdaptiveConfig(_KanayamaConfig):
 
     @model_validator(mode="after")
     def _gains_inside_bounds(self) -> NNAdaptiveConfig:
+        if self.inner == "none" and self.jacobian != "network":  # they are the inner loop's, through its bandwidth
+            raise FieldError(
+                "jacobian",
+                f'jacobian = "{self.jacobian}" needs an inner loop (its bandwidth or its model of the robot), but '
+                'inner = "none"',
+                'use jacobian = "network" (the emulator\'s, eq. 34), or an inner loop',
+            )
         for name, low, gain, high in zip(("Kx", "Ky", "Ktheta"), self.gain_min, self.gains, self.gain_max, strict=True):
             if not low <= gain <= high:
                 raise FieldError("gains", f"{name} = {gain:g} lies outside [gain_min, gain_max] = [{low:g}, {high:g}]")
@@ -224,7 +256,7 @@ class NNAdaptiveConfig(_KanayamaConfig):
             substeps=max(1, math.ceil(control_period / 1e-3 - 1e-9)),
         )
 
-    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
+    def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade | VelocityOutput:
         """The controller with a freshly initialised emulator (its identification is done by the runner)."""
         uses_velocity = self.emulator == "E1"
         k_v, k_w = self.identification_scale()  # the emulator's range is the identification's
@@ -235,7 +267,9 @@ class NNAdaptiveConfig(_KanayamaConfig):
             ),
             uses_velocity,
         )
-        bandwidth = jnp.asarray(self.inner_bandwidth(nominal), float)
+        # without an inner loop only the network's Jacobian is defined (the validator refuses the others); the
+        # analytic coefficients are then unused, kept at a finite placeholder so the outer law's fields stay alike
+        bandwidth = jnp.asarray(self.inner_bandwidth(nominal) if self.inner != "none" else (1.0, 1.0), float)
         freeze = self.freeze_time if self.freeze_time is not None else (0.0 if self.identification else 2.0)
         outer = same_named(
             self,
@@ -246,4 +280,4 @@ class NNAdaptiveConfig(_KanayamaConfig):
             freeze_time=freeze,
             nominal_period=self._nominal_period(nominal, control_period),
         )
-        return Cascade(outer, self.build_inner(nominal, control_period))
+        return self.over_inner(outer, nominal, control_period)

@@ -92,8 +92,16 @@ class ControllerKind:
 
     @property
     def tunable(self) -> bool:
-        """``ddtrack tune`` can tune its gains: Kanayama's, on the torque plant, differentiated through rollouts."""
+        """``ddtrack tune`` can tune its gains: Kanayama's, on the torque plant, differentiated through rollouts
+        (with its default inner loop: :func:`controller_output` says what a given config outputs)."""
         return self.differentiable and self.has_kanayama_gains and self.output == "torque"
+
+
+def controller_output(config: Any) -> Literal["torque", "velocity"]:
+    """What the controller of ``config`` hands the plant: the config's own answer where its keys decide it (a
+    ``controller_output()`` method, e.g. ``inner = "none"`` gives velocity), else its kind's registered output."""
+    decides = getattr(config, "controller_output", None)
+    return decides() if callable(decides) else controller_kind(config.kind).output
 
 
 _KINDS: dict[str, ControllerKind] = {}
@@ -139,7 +147,9 @@ def register_controller(
     needs_reference : bool
         ``build`` takes the reference too, as ``trajectory=`` (a controller that looks ahead along it).
     output : {"torque", "velocity"}
-        Wheel torques for the dynamic plant, or (v, omega) for the unicycle with ideal velocity tracking.
+        Wheel torques for the dynamic plant, or (v, omega) for the unicycle with ideal velocity tracking: the
+        default, which a config overrides through a ``controller_output()`` method when a key decides it (the
+        shared inner loop's ``inner = "none"``; :func:`controller_output`).
 
     Returns
     -------
