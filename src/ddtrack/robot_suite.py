@@ -148,6 +148,8 @@ def base_scenario(robot: Robot, entry: Entry, trajectory: str) -> dict[str, Any]
     fields = controller_kind(entry.kind).config.model_fields
     if preset.max_speed is not None and "max_velocity" in fields:  # the clamps at what the robot can do
         controller |= {"max_velocity": preset.max_speed, "max_yaw_rate": preset.max_yaw_rate}
+        if "rotate_yaw_rate" in fields:  # Nav2's rotation in place, within what the robot can turn
+            controller["rotate_yaw_rate"] = min(fields["rotate_yaw_rate"].default, preset.max_yaw_rate)
     if entry.kind == "mppi":  # its defaults suit the paper's robot: keep them per unit of acceleration
         paper = PRESETS["paper"].params
         scale = preset.params["mass"] * preset.params["wheel_radius"] / (paper["mass"] * paper["wheel_radius"])
