@@ -23,6 +23,7 @@ from ddtrack.model import (
     current_rate,
     torque_driver,
     torque_envelope,
+    torque_feedforward,
     voltage_driver,
 )
 from ddtrack.model.motors import RPM
@@ -158,6 +159,21 @@ def test_the_torque_driver_meets_a_feasible_command_and_saturates_an_infeasible_
     np.testing.assert_array_equal(tau, high)
     tau, _ = torque_driver(motor, low - excess, speeds)
     np.testing.assert_array_equal(tau, low)
+
+
+def test_a_torque_law_through_a_voltage_board_gets_the_current_drivers_torque():
+    """Up to the no-load speed the feed-forward voltage through the PWM driver and the current driver give the same
+    torque, feasible or not, with the current limit active or not (model.md §1.7, "Drivers")."""
+    rng = np.random.default_rng(11)
+    for motor in (xl430(), xl430(current_limit=0.5)):  # the supply binds first, then the current limit
+        speeds = jnp.asarray(rng.uniform(-1.0, 1.0, 2000) * motor.no_load_speed)
+        commands = jnp.asarray(rng.uniform(-2.0, 2.0, 2000) * motor.stall_torque)
+        by_current, i_current = torque_driver(motor, commands, speeds)
+        by_voltage, i_voltage = voltage_driver(motor, torque_feedforward(motor, commands, speeds), speeds)
+        np.testing.assert_allclose(by_voltage, by_current, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(i_voltage, i_current, rtol=1e-12, atol=1e-14)
+        low, high = torque_envelope(motor, speeds)
+        assert bool(jnp.any(by_current == high)) and bool(jnp.any(by_current == low))  # the clips were reached
 
 
 # --- the voltage driver and the inductive current ---------------------------------------------------

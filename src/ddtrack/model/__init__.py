@@ -33,6 +33,7 @@ from .motors import (
     current_rate,
     torque_driver,
     torque_envelope,
+    torque_feedforward,
     voltage_driver,
 )
 from .params import RobotParams
@@ -82,6 +83,7 @@ __all__ = [
     "torque_driven_model",
     "torque_driver",
     "torque_envelope",
+    "torque_feedforward",
     "velocity_basis",
     "velocity_driven_model",
     "voltage_driver",

@@ -202,6 +202,17 @@ def voltage_driver(motor: DCMotor, voltage_command: Array, wheel_speed: Array) -
     return motor.efficiency * motor.torque_constant * current, current
 
 
+def torque_feedforward(motor: DCMotor, tau_command: Array, wheel_speed: Array) -> Array:
+    """The voltage [V] a PWM board without a current sensor applies for a torque command [N m] (model.md §1.7):
+    u* = R_a tau* / (eta k_t) + k_e phi_dot, the motor's own model inverted at the measured ``wheel_speed``.
+
+    Through :func:`voltage_driver` it gives :func:`torque_driver`'s torque wherever the current and voltage ranges
+    overlap (up to the no-load speed): the clips of the two drivers meet in another order, not another place.
+    """
+    gain = motor.efficiency * motor.torque_constant
+    return motor.resistance * jnp.asarray(tau_command) / gain + motor.back_emf * jnp.asarray(wheel_speed)
+
+
 def current_rate(motor: DCMotor, voltage: Array, current: Array, wheel_speed: Array) -> Array:
     """di/dt = (u - R_a i - k_e phi_dot) / L_a [A/s], the armature's ODE for a motor with inductance (model.md §1.7).
 
