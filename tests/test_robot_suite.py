@@ -40,7 +40,7 @@ def _scenario(plan, robot, controller, condition, trajectory="figure_eight"):
 
 def test_each_robot_drives_the_plant_it_has_and_each_condition_changes_what_it_says():
     labels = ["backstepping", "kinematic_backstepping"]
-    plan = plan_robot_suite(RobotSuite(seeds=1), labels)
+    plan = plan_robot_suite(RobotSuite(trajectories=("figure_eight", "square"), seeds=1), labels)
     assert _scenario(plan, "paper", "backstepping", "nominal").plant.model == "dynamic"
     assert _scenario(plan, "turtlebot3_burger", "backstepping", "nominal").plant.model == "slip"
     assert _scenario(plan, "turtlebot3_burger", "kinematic_backstepping", "nominal").plant.model == "slip_velocity"
@@ -64,7 +64,7 @@ def test_each_robot_drives_the_plant_it_has_and_each_condition_changes_what_it_s
 
 
 def test_cells_a_robot_cannot_express_are_left_out_and_say_why():
-    run, left = cells(RobotSuite(), ["backstepping", "kinematic_backstepping"])
+    run, left = cells(RobotSuite(trajectories=("figure_eight", "square")), ["backstepping", "kinematic_backstepping"])
     why = {(c["robot"], c["controller"], c["condition"]): c["why"] for c in left}
     assert why[("pioneer_3dx", "backstepping", "nominal")] == "takes no torque commands"
     assert why[("paper", "kinematic_backstepping", "nominal")] == "takes no velocity commands"
