@@ -16,7 +16,7 @@ from ._format import significant, with_interval
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
 
 #: warnings that say a run asked for something the real robot cannot give
-IMPLAUSIBLE = ("friction_exceeds_floor", "wheel_speed_beyond_motor", "torque_beyond_motor")
+IMPLAUSIBLE = ("friction_exceeds_floor", "friction_beyond_any_floor", "wheel_speed_beyond_motor", "torque_beyond_motor")
 
 
 def rows(records: dict[str, dict]) -> list[dict]:
@@ -155,7 +155,7 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         lines += [
             f"### {robot}",
             "",
-            "mean e_tr [m] [95 % CI], ranked by the nominal condition; "
+            "mean e_tr in m, with its 95 % CI over seeds, ranked by the nominal condition; "
             "implausible: runs that asked for more grip, wheel speed or torque than the robot has",
             "",
         ]
@@ -185,7 +185,7 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         lines += [
             "### Does the paper's NN-adaptive law help?",
             "",
-            "Pooled paired improvement of mean e_tr [%] [95 % CI] over every cell the two share "
+            "Pooled paired improvement of mean e_tr in %, with its 95 % CI, over every cell the two share "
             "(positive: the NN-adaptive law tracks better):",
             "",
             "| robot | comparison | improvement [%] | pairs |",
