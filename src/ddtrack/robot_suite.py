@@ -226,10 +226,10 @@ def plan_robot_suite(suite: RobotSuite, entries: Sequence[str]) -> Plan:
         data = base_scenario(robot, entry, cell["trajectory"])
         assert data is not None, "cells() leaves out robots that take no such command"
         overrides = [*(condition_overrides(robot, cell["condition"]) or []), *suite.overrides]
+        described = {"base": copy.deepcopy(data), "overrides": overrides}  # before the overrides change it
         for override in overrides:
             apply_override(data, override)
         labels = {"study": "robots", **{k: cell[k] for k in ("robot", "trajectory", "condition")}}
-        described = {"base": copy.deepcopy(base_scenario(robot, entry, cell["trajectory"])), "overrides": overrides}
         configurations.append(Configuration(entry.label, described, validate_scenario(data), labels))
     runs = {}
     for index, configuration in enumerate(configurations):
