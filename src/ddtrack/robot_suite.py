@@ -177,7 +177,7 @@ class RobotSuite:
     every cell last (e.g. shorter runs, for tests)."""
 
     robots: tuple[str, ...] = tuple(ROBOTS)
-    trajectories: tuple[str, ...] = ("figure_eight",)  #: the square too doubles the compilations and the wall time
+    trajectories: tuple[str, ...] = TRAJECTORIES  #: both paths: corners and loops rank controllers differently
     conditions: tuple[str, ...] = CONDITIONS
     seeds: int = 3
     overrides: tuple[str, ...] = ()
