@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from ddtrack.metrics import pooled_improvement
-from ddtrack.robot_board import paired, ranking_agreement, robot_board
+from ddtrack.robot_board import agreement_by_path, paired, ranking_agreement, robot_board
 from ddtrack.robot_suite import (
     ENTRY,
     ROBOTS,
@@ -132,6 +132,25 @@ def test_ranking_agreement_is_kendalls_tau_over_shared_controllers():
     agreement = ranking_agreement({"paper": paper, "same": same, "reversed": reversed_})
     assert agreement["same"]["tau"] == pytest.approx(1.0) and agreement["same"]["controllers"] == ["a", "b", "c", "d"]
     assert agreement["reversed"]["tau"] == pytest.approx(-1.0)
+
+
+def test_each_path_has_its_own_ranking_agreement():
+    controllers = {"a": 1.0, "b": 2.0, "c": 3.0}
+    runs = [
+        _run(robot, name, "nominal", 0, error if robot == "paper" or path == "square" else 4.0 - error, path)
+        for robot in ("paper", "r")
+        for path in ("figure_eight", "square")
+        for name, error in controllers.items()
+    ]
+    by_path = agreement_by_path(runs, ["paper", "r"], list(controllers), ["nominal"])
+    assert by_path["square"]["r"]["tau"] == pytest.approx(1.0)  # same order as the paper robot on the square
+    assert by_path["figure_eight"]["r"]["tau"] == pytest.approx(-1.0)  # reversed on the figure eight
+    assert (
+        agreement_by_path(
+            [r for r in runs if r["trajectory"] == "square"], ["paper", "r"], list(controllers), ["nominal"]
+        )
+        == {}
+    )
 
 
 TINY = RobotSuite(

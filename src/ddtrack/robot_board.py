@@ -112,6 +112,25 @@ def ranking_agreement(boards: dict[str, list[dict]], reference: str = "paper") -
     return out
 
 
+def agreement_by_path(
+    runs: list[dict], robots: Sequence[str], entries: Sequence[str], conditions: Sequence[str]
+) -> dict[str, dict[str, dict]]:
+    """:func:`ranking_agreement` on each path's runs alone (corners and loops may rank controllers differently);
+    empty when the runs cover one path."""
+    paths = sorted({r["trajectory"] for r in runs})
+    if len(paths) < 2:
+        return {}
+    return {
+        path: ranking_agreement(
+            {
+                robot: robot_board([r for r in runs if r["trajectory"] == path], robot, entries, conditions)
+                for robot in robots
+            }
+        )
+        for path in paths
+    }
+
+
 #: (baseline, candidate): the paper's question, over torque and over cmd_vel
 NN_QUESTIONS = (
     ("backstepping", "nn_adaptive_backstepping"),
@@ -128,7 +147,8 @@ def _ci(summary: dict | None) -> str:
 def summarize(
     records: dict[str, dict], robots: Sequence[str], conditions: Sequence[str], entries: Sequence[str], left_out: list
 ) -> dict:
-    """The leaderboard of every robot, the ranking agreement, the NN questions' answers and the left-out cells."""
+    """The leaderboard of every robot, the ranking agreement (over all paths and per path), the NN questions'
+    answers and the left-out cells."""
     runs = rows(records)
     boards = {robot: robot_board(runs, robot, entries, conditions) for robot in robots}
     questions = {
@@ -138,6 +158,7 @@ def summarize(
     return {
         "boards": boards,
         "ranking_agreement": ranking_agreement(boards),
+        "ranking_agreement_by_path": agreement_by_path(runs, robots, entries, conditions),
         "nn_adaptive": questions,
         "left_out": left_out,
     }
@@ -179,6 +200,19 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         ]
         for robot, a in summary["ranking_agreement"].items():
             lines.append(f"| {robot} | {a['tau']:.2f} | {significant(a['p_value'])} | {len(a['controllers'])} |")
+        lines.append("")
+    by_path = summary.get("ranking_agreement_by_path") or {}
+    if by_path:
+        robots = sorted({robot for agreement in by_path.values() for robot in agreement})
+        lines += [
+            "Kendall's tau on each path alone (its own nominal rankings):",
+            "",
+            "| path | " + " | ".join(robots) + " |",
+            "|---|" + "---|" * len(robots),
+        ]
+        for path, agreement in by_path.items():
+            taus = (f"{agreement[r]['tau']:.2f}" if r in agreement else "" for r in robots)
+            lines.append(f"| {path} | " + " | ".join(taus) + " |")
         lines.append("")
     answers = [(robot, q, v) for robot, qs in summary["nn_adaptive"].items() for q, v in qs.items() if v]
     if answers:
