@@ -41,7 +41,7 @@ LAYERS = [
     {"animation", "schema"},
     {"rundir"},
     {"mc", "tune"},
-    {"reproduce", "report", "envs", "sweep", "robot_board"},
+    {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},
     {"suite", "robot_suite"},
     {"cluster"},
     {"cli"},

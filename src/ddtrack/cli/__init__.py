@@ -355,4 +355,5 @@ def exit_now(code: int) -> None:
     os._exit(code)
 
 
+from . import ros as _ros  # noqa: E402, F401  (registers export and import)
 from . import studies as _studies  # noqa: E402, F401  (registers reproduce, mc, tune, sweep and bench)

@@ -1,0 +1,292 @@
+"""``ddtrack export``: a run folder as a ROS 2 bag (MCAP) that Foxglove and ``ros2 bag`` open, or as CSV with units.
+
+One message per control period on each periodic topic, stamped at ``start + t`` (header stamp and the bag's
+receive time alike):
+
+=================  ==========================================  =================================================
+topic              type                                        what
+=================  ==========================================  =================================================
+/tf                tf2_msgs/msg/TFMessage                      odom -> base_link, the robot's true pose
+/odom              nav_msgs/msg/Odometry                       true pose, and body twist (v, 0, omega)
+/odom_estimate     nav_msgs/msg/Odometry                       the odometry the controller saw ([sensing] only)
+/reference         geometry_msgs/msg/PoseStamped               the reference pose
+/cmd_vel           geometry_msgs/msg/Twist (or TwistStamped)   the velocity command (v_cmd, omega_cmd)
+/joint_states      sensor_msgs/msg/JointState                  wheel angles [rad], speeds [rad/s], torques [N m]
+/reference_path    nav_msgs/msg/Path                           the whole reference, once, at the start
+/path              nav_msgs/msg/Path                           the whole driven path, once, at the end
+=================  ==========================================  =================================================
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from ..errors import ConfigError, RunError
+from ..outdir import atomic_write, read_marker
+from .messages import (
+    BODY_FRAME,
+    NANOSECONDS,
+    WHEEL_JOINTS,
+    WORLD_FRAME,
+    header,
+    message,
+    no_covariance,
+    planar_pose,
+    twist,
+    typestore,
+    yaw_quaternion,
+)
+
+#: units of the time-series columns, for the CSV header; a column not listed (a plugin's log) gets none
+COLUMN_UNITS = {
+    "t": "s",
+    **dict.fromkeys(("x", "y", "x_ref", "y_ref", "e_x", "e_y", "e_tr", "odom_x", "odom_y", "odom_ex", "odom_ey"), "m"),
+    **dict.fromkeys(("theta", "theta_ref", "e_theta", "odom_theta", "odom_etheta", "phi_r", "phi_l"), "rad"),
+    **dict.fromkeys(("pi_r", "pi_l"), "rad"),
+    **dict.fromkeys(("v", "v_ref", "v_cmd", "odom_v", "v_star", "u", "w"), "m/s"),
+    **dict.fromkeys(("slip_r", "slip_l", "slip_lateral"), "m/s"),
+    **dict.fromkeys(("omega", "omega_ref", "omega_cmd", "odom_omega", "omega_star", "r"), "rad/s"),
+    **dict.fromkeys(("wheel_speed_r", "wheel_speed_l", "phidot_r", "phidot_l"), "rad/s"),
+    **dict.fromkeys(("tau_r", "tau_l"), "N m"),
+    **dict.fromkeys(("i_r", "i_l"), "A"),
+    **dict.fromkeys(("force_rx", "force_lx", "force_y"), "N"),
+    "kx": "1/s",
+    "ky": "1/m^2",
+    "ktheta": "1/m",
+    "m_hat": "kg",
+    "inertia_hat": "kg m^2",
+    **dict.fromkeys(("saturated", "gate", "rotating", "mu_required", "emulator_loss", "fix_clock"), "1"),
+}
+
+PERIODIC_TOPICS = ("/tf", "/odom", "/reference", "/cmd_vel", "/joint_states")
+
+
+@dataclass(frozen=True)
+class Export:
+    """What ``export_run`` wrote: the file, and the number of messages per topic (empty for CSV)."""
+
+    path: Path
+    rows: int
+    counts: Mapping[str, int]
+
+
+def export_run(
+    folder: Path, to: Path, *, start: float | None = None, twist_stamped: bool = False, overwrite: bool = False
+) -> Export:
+    """Write the run folder ``folder`` to ``to``: ``.mcap`` (one MCAP file, a rosbag2 storage file), ``.csv``
+    (the time series, units in the header), or a path without suffix (a rosbag2 folder: ``metadata.yaml`` and
+    its MCAP file, what ``ros2 bag record`` writes).
+
+    ``start`` [s since the epoch] stamps t = 0; by default the time the run folder was written. The file
+    appears whole or not at all; an existing ``to`` is replaced only with ``overwrite`` (and a folder only when
+    it is a rosbag2 folder).
+    """
+    from ..animation import read_run
+
+    columns, scenario = read_run(folder)
+    kind = to.suffix.lower()
+    if kind not in (".mcap", ".csv", ""):
+        raise ConfigError("--to", f"'{to}' has the suffix '{to.suffix}'", "give FILE.mcap, FILE.csv or a folder name")
+    check_target(to, overwrite=overwrite)
+    if kind == ".csv":
+        atomic_write(to, lambda file: write_csv(columns, file))
+        return Export(to, len(columns["t"]), {})
+    origin = _origin_nanoseconds(folder, start)
+    plant = scenario.plant_params()
+    wheels = wheel_signals(columns, half_axle=plant.half_axle, wheel_radius=plant.wheel_radius)
+    counts = _write_bag_atomically(to, columns, wheels, origin, twist_stamped=twist_stamped)
+    return Export(to, len(columns["t"]), counts)
+
+
+def check_target(to: Path, *, overwrite: bool) -> None:
+    """Refuse (ConfigError, before any work) to replace ``to`` without ``overwrite``, or ever to replace a folder that
+    is not a rosbag2 folder, or a folder by a file."""
+    if not to.exists():
+        return
+    if not overwrite:
+        raise ConfigError("--to", f"'{to}' exists", "give a new path, or add --overwrite to replace it")
+    if to.is_dir() and (to.suffix or not (to / "metadata.yaml").is_file()):
+        raise ConfigError("--to", f"'{to}' is a folder that is not a rosbag2 folder", "give another path")
+
+
+def _origin_nanoseconds(folder: Path, start: float | None) -> int:
+    """t = 0 in nanoseconds since the epoch: ``start``, else when the run folder was written."""
+    if start is not None:
+        return round(start * NANOSECONDS)
+    marker = read_marker(folder) or {}
+    written = marker.get("written") if isinstance(marker, dict) else None
+    if isinstance(written, str):
+        try:
+            return round(datetime.datetime.strptime(written, "%Y-%m-%dT%H:%M:%S%z").timestamp() * NANOSECONDS)
+        except ValueError:
+            pass  # an older or edited marker: fall back to the time series' own file time
+    return (folder / "timeseries.parquet").stat().st_mtime_ns
+
+
+def write_csv(columns: Mapping[str, np.ndarray], file: IO[bytes]) -> None:
+    """The time series as CSV: a header of ``name [unit]`` (just ``name`` when the unit is not known), then one
+    row per control period, every value with the 17 significant digits that give its float64 back."""
+    names = list(columns)
+    head = ",".join(f"{name} [{COLUMN_UNITS[name]}]" if name in COLUMN_UNITS else name for name in names)
+    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
+    file.write((head + "\n").encode())
+    file.write("".join(",".join(map(repr, map(float, row))) + "\n" for row in table).encode())
+
+
+def wheel_signals(columns: Mapping[str, np.ndarray], *, half_axle: float, wheel_radius: float) -> dict[str, np.ndarray]:
+    """Each drive wheel's angle [rad], speed [rad/s] and torque [N m] (NaN: the plant takes no torque).
+
+    Speeds are the plant's own wheel spins where it has them (a slip plant), else those of rolling without slip,
+    (v +- L omega) / R; angles are the recorded ones (encoders on), else the speeds integrated (trapezoid)."""
+    speed = {}
+    for side, sign in (("r", 1.0), ("l", -1.0)):
+        for name in (f"phidot_{side}", f"wheel_speed_{side}"):
+            if name in columns:
+                speed[side] = np.asarray(columns[name], dtype=float)
+                break
+        else:
+            speed[side] = (columns["v"] + sign * half_axle * columns["omega"]) / wheel_radius
+    t = columns["t"]
+    signals = {}
+    for side in ("r", "l"):
+        angle = columns.get(f"phi_{side}")
+        if angle is None:
+            steps = np.diff(t) * 0.5 * (speed[side][1:] + speed[side][:-1])
+            angle = np.concatenate([[0.0], np.cumsum(steps)])
+        signals[f"angle_{side}"] = np.asarray(angle, dtype=float)
+        signals[f"speed_{side}"] = speed[side]
+        signals[f"torque_{side}"] = np.asarray(columns.get(f"tau_{side}", np.full(t.shape, np.nan)), dtype=float)
+    return signals
+
+
+def bag_messages(
+    columns: Mapping[str, np.ndarray], wheels: Mapping[str, np.ndarray], origin: int, *, twist_stamped: bool
+) -> Iterator[tuple[str, str, int, Any]]:
+    """(topic, type, time [ns], message) of an exported run, in time order."""
+    stamps = origin + np.round(np.asarray(columns["t"]) * NANOSECONDS).astype(np.int64)
+    path_poses = lambda prefix, frame_stamps: [  # noqa: E731
+        message("geometry_msgs/msg/PoseStamped", header=header(int(s), WORLD_FRAME), pose=planar_pose(x, y, th))
+        for s, x, y, th in zip(
+            frame_stamps, columns[f"x{prefix}"], columns[f"y{prefix}"], columns[f"theta{prefix}"], strict=True
+        )
+    ]
+    first, last = int(stamps[0]), int(stamps[-1])
+    path_type = "nav_msgs/msg/Path"
+    yield (
+        "/reference_path",
+        path_type,
+        first,
+        message(path_type, header=header(first, WORLD_FRAME), poses=path_poses("_ref", stamps)),
+    )
+    has_torque = not np.all(np.isnan(wheels["torque_r"]))
+    estimate = all(f"odom_{name}" in columns for name in ("x", "y", "theta", "v", "omega"))
+    for k, s in enumerate(map(int, stamps)):
+        pose = planar_pose(columns["x"][k], columns["y"][k], columns["theta"][k])
+        transform = message(
+            "geometry_msgs/msg/Transform",
+            translation=message("geometry_msgs/msg/Vector3", x=float(columns["x"][k]), y=float(columns["y"][k]), z=0.0),
+            rotation=yaw_quaternion(columns["theta"][k]),
+        )
+        stamped = message(
+            "geometry_msgs/msg/TransformStamped",
+            header=header(s, WORLD_FRAME),
+            child_frame_id=BODY_FRAME,
+            transform=transform,
+        )
+        yield "/tf", "tf2_msgs/msg/TFMessage", s, message("tf2_msgs/msg/TFMessage", transforms=[stamped])
+        yield "/odom", "nav_msgs/msg/Odometry", s, _odometry(s, pose, columns["v"][k], columns["omega"][k])
+        if estimate:
+            seen = planar_pose(columns["odom_x"][k], columns["odom_y"][k], columns["odom_theta"][k])
+            yield (
+                "/odom_estimate",
+                "nav_msgs/msg/Odometry",
+                s,
+                _odometry(s, seen, columns["odom_v"][k], columns["odom_omega"][k]),
+            )
+        reference = planar_pose(columns["x_ref"][k], columns["y_ref"][k], columns["theta_ref"][k])
+        yield (
+            "/reference",
+            "geometry_msgs/msg/PoseStamped",
+            s,
+            message("geometry_msgs/msg/PoseStamped", header=header(s, WORLD_FRAME), pose=reference),
+        )
+        command = twist(columns["v_cmd"][k], columns["omega_cmd"][k])
+        if twist_stamped:
+            yield (
+                "/cmd_vel",
+                "geometry_msgs/msg/TwistStamped",
+                s,
+                message("geometry_msgs/msg/TwistStamped", header=header(s, BODY_FRAME), twist=command),
+            )
+        else:
+            yield "/cmd_vel", "geometry_msgs/msg/Twist", s, command
+        yield (
+            "/joint_states",
+            "sensor_msgs/msg/JointState",
+            s,
+            message(
+                "sensor_msgs/msg/JointState",
+                header=header(s, BODY_FRAME),
+                name=list(WHEEL_JOINTS),
+                position=np.array([wheels["angle_r"][k], wheels["angle_l"][k]]),
+                velocity=np.array([wheels["speed_r"][k], wheels["speed_l"][k]]),
+                effort=np.array([wheels["torque_r"][k], wheels["torque_l"][k]]) if has_torque else np.zeros(0),
+            ),
+        )
+    yield "/path", path_type, last, message(path_type, header=header(last, WORLD_FRAME), poses=path_poses("", stamps))
+
+
+def _odometry(nanoseconds: int, pose: Any, v: float, omega: float) -> Any:
+    """``nav_msgs/msg/Odometry`` of a planar pose in the world frame, its twist in the body frame."""
+    return message(
+        "nav_msgs/msg/Odometry",
+        header=header(nanoseconds, WORLD_FRAME),
+        child_frame_id=BODY_FRAME,
+        pose=message("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=no_covariance()),
+        twist=message("geometry_msgs/msg/TwistWithCovariance", twist=twist(v, omega), covariance=no_covariance()),
+    )
+
+
+def _write_bag_atomically(
+    to: Path, columns: Mapping[str, np.ndarray], wheels: Mapping[str, np.ndarray], origin: int, *, twist_stamped: bool
+) -> dict[str, int]:
+    """Write the bag in a hidden sibling folder, then move it (its MCAP file, or the whole rosbag2 folder) into
+    place: a failure midway leaves nothing behind."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    parent = to.parent if str(to.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        scratch = Path(tempfile.mkdtemp(prefix=f".{to.name}.", dir=parent))
+    except OSError as exc:
+        raise RunError(f"cannot write '{to}' ({exc.strerror or exc})") from exc
+    bag = scratch / (to.stem if to.suffix else to.name)
+    store, counts = typestore(), dict[str, int]()
+    try:
+        with Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+            connections: dict[str, Any] = {}
+            for topic, msgtype, nanoseconds, msg in bag_messages(columns, wheels, origin, twist_stamped=twist_stamped):
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                writer.write(connections[topic], nanoseconds, store.serialize_cdr(msg, msgtype))
+                counts[topic] = counts.get(topic, 0) + 1
+        if to.suffix:
+            os.replace(bag / f"{bag.name}.mcap", to)
+        else:
+            if to.exists():  # an earlier export's rosbag2 folder (checked by the caller)
+                shutil.rmtree(to)
+            os.replace(bag, to)
+    except OSError as exc:
+        raise RunError(f"cannot write '{to}' ({exc.strerror or exc}); nothing partial was left") from exc
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return counts
