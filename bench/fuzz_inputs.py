@@ -408,8 +408,9 @@ def gains_out_of_range(rng: random.Random, base: Base) -> Mutant:
 
 
 def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
-    """A waypoints trajectory with no, one, repeated or malformed points, or a file that does not exist, is a
-    folder, is not CSV, is not UTF-8 or is a device."""
+    """A waypoints trajectory with no point, one point (perhaps repeated), malformed points, times that do not
+    increase or an unknown column, or a file that does not exist, is a folder, is not CSV, is not UTF-8 or is a
+    device (a repeated point among others is dropped with a warning, not refused)."""
     data = copy.deepcopy(base.data)
     if "scenario" in data:  # a sweep: its scenario file is missing, a folder, or not a scenario
         how = rng.choice(["missing", "folder", "csv"])
@@ -438,7 +439,7 @@ def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
                 [[0.0, 0.0]],
                 [[0.0, 0.0], [0.0, 0.0]],
                 [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]],
-                [[0.0, 0.0], [1.0, 1.0], [1.0, 1.0], [2.0, 0.0]],
+                [[0.0, 0.0], [1.0, 1.0], [1e308, 0.0]],
                 [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
                 [[0.0], [1.0]],
                 [[0.0, 0.0], [math.nan, 1.0]],
@@ -454,7 +455,8 @@ def bad_waypoints(rng: random.Random, base: Base) -> Mutant:
                 b"x,y\n",
                 b"x,y\n3,4\n",
                 b"1,1\n1,1\n1,1\n",
-                b"0,0\n5,5\n5,5\n9,0\n",
+                b"t,x,y\n0,0,0\n1,5,5\n1,9,0\n",
+                b"x,y,z\n0,0,0\n1,1,1\n",
                 b"0,0,0\n1,1,1\n",
                 b"0;0\n1;1\n",
                 b"0,0\n1,zz\n",

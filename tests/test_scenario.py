@@ -58,11 +58,11 @@ MALFORMED = [
     ("negative speed", ("trajectory", "speed"), -0.5, "trajectory.speed", "greater than 0"),
     ("strict with pd", ("controller", "inner"), "pd", "controller.strict", "computed_torque"),
     (
-        "waypoints repeated",
+        "waypoints times not increasing",
         ("trajectory",),
-        {"kind": "waypoints", "points": [[0, 0], [1, 1], [1, 1]]},
-        "trajectory.points",
-        "repeats",
+        {"kind": "waypoints", "points": [[0, 0], [1, 1], [2, 1]], "times": [0, 2, 2]},
+        "trajectory.times",
+        "point 2: t = 2 s is not after 2 s",
     ),
     (
         "waypoints missing file",

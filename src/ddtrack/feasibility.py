@@ -5,7 +5,7 @@ for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a rob
 1.89 m of error), an angle beyond 2 pi (``heading = 45`` is almost surely degrees; it ran as a 58.3 deg line), and
 masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams). It returns
 warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp or beyond the top speed or yaw rate
-of the ``robot.preset``.
+of the ``robot.preset``, and what loading the trajectory changed (repeated waypoints dropped).
 """
 
 from __future__ import annotations
@@ -168,4 +168,5 @@ def check(scenario: Any) -> list[dict]:
     check_angles(scenario)
     check_units(scenario)
     peaks = reference_peaks(scenario)
-    return [*check_clamps(scenario, peaks), *check_robot_limits(scenario, peaks)]
+    loading = list(getattr(scenario.trajectory, "load_warnings", []))  # e.g. repeated waypoints dropped
+    return [*loading, *check_clamps(scenario, peaks), *check_robot_limits(scenario, peaks)]

@@ -79,7 +79,7 @@ from .trajectory_configs import LineTrajectory as LineTrajectory
 from .trajectory_configs import SinusoidTrajectory as SinusoidTrajectory
 from .trajectory_configs import SquareTrajectory as SquareTrajectory
 from .trajectory_configs import WaypointsTrajectory as WaypointsTrajectory
-from .trajectory_configs import read_waypoints as read_waypoints
+from .waypoint_rows import read_waypoints as read_waypoints
 
 __all__ = [
     "CONTROLLERS",

@@ -2,25 +2,23 @@
 
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationInfo, model_validator
+from pydantic import Field, ModelWrapValidatorHandler, PrivateAttr, ValidationInfo, model_validator
 
-from ..trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square
+from ..trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square, timed_path
 from ._base import (
     MAX_COORDINATE,
     FieldError,
     Length,
     NonNegative,
-    Pair,
     Position,
     Positive,
     _Section,
-    read_input,
 )
+from .waypoint_rows import WaypointRows, read_waypoint_rows, tidy_rows
 
 # --- [trajectory] --------------------------------------------------------------------------------
 
@@ -116,34 +114,47 @@ class SinusoidTrajectory(_Section):
 
 
 class WaypointsTrajectory(_Section):
-    """A polyline through waypoints at constant speed with rounded corners.
+    """A polyline through waypoints at constant speed with rounded corners, or, with times, a timed path that is at
+    each point at its time (built by ``ddtrack.trajectories.timed_path``).
 
-    ``file`` is a CSV of x,y rows (an optional header line), relative to the scenario file and inside its
-    folder tree (an absolute path, or a ``..`` or symlink leading out, is an error); the resolved scenario
-    holds the points inline instead.
+    ``file`` is a CSV of rows (an optional header naming the columns from t, x, y, yaw, v), relative to the scenario
+    file and inside its folder tree (an absolute path, or a ``..`` or symlink leading out, is an error); the
+    resolved scenario holds the rows inline instead. A row at the same point as the row before is dropped, with a
+    warning (a timed path keeps it when its time is later: a stop).
     """
 
     kind: Literal["waypoints"]
-    file: str | None = Field(None, description="CSV file of x,y rows, relative to the scenario file.")
+    file: str | None = Field(
+        None,
+        description="CSV file of x,y rows, or columns t, x, y, yaw, v under a header, relative to the scenario file.",
+    )
     points: list[Position] | None = Field(None, description="Inline [[x, y], ...] instead of a file [m].")
-    speed: Positive = Field(0.5, description="v_r [m/s].")
-    corner_radius: NonNegative = Field(0.0, description="Fillet radius at interior waypoints [m].")
-    loop: bool = Field(False, description="Repeat the path; otherwise the reference stops at the end.")
+    times: list[float] | None = Field(
+        None, description="Time of each point [s], increasing: a timed path (ignores speed and takes no corner_radius)."
+    )
+    yaws: list[float] | None = Field(
+        None, description="Heading held where a timed path stands still, one per point [rad]."
+    )
+    speeds: list[NonNegative] | None = Field(
+        None, description="Speed at each point [m/s]: the times by the trapezoid rule when times is not given."
+    )
+    speed: Positive = Field(0.5, description="v_r of an untimed path [m/s].")
+    corner_radius: NonNegative = Field(0.0, description="Fillet radius at interior waypoints of an untimed path [m].")
+    loop: bool = Field(False, description="Repeat an untimed path; otherwise the reference stops at the end.")
+    _notes: tuple[str, ...] = PrivateAttr(default=())
 
-    @model_validator(mode="before")
+    @model_validator(mode="wrap")
     @classmethod
-    def _read_file(cls, data: Any, info: ValidationInfo) -> Any:
-        if isinstance(data, dict) and data.get("file") is not None and data.get("points") is None:
-            if not isinstance(data["file"], str):
-                return data  # the type error is reported by the field
-            base = Path((info.context or {}).get("base_dir", "."))
-            try:
-                data = {**data, "points": read_waypoints(_contained(base, data["file"])), "file": None}
-            except ValueError as exc:
-                raise FieldError("file", str(exc)) from None
-        if isinstance(data, dict) and isinstance(data.get("points"), list):  # TOML arrays -> [x, y] tuples
-            data = {**data, "points": [tuple(p) if isinstance(p, list) else p for p in data["points"]]}
-        return data
+    def _read_rows(
+        cls, data: Any, handler: ModelWrapValidatorHandler[WaypointsTrajectory], info: ValidationInfo
+    ) -> Any:
+        note = None
+        if isinstance(data, dict):
+            data, note = _tidied(data, Path((info.context or {}).get("base_dir", ".")))
+        model = handler(data)
+        if note is not None:
+            model._notes = (note,)
+        return model
 
     @model_validator(mode="after")
     def _valid_path(self) -> WaypointsTrajectory:
@@ -151,15 +162,88 @@ class WaypointsTrajectory(_Section):
             raise FieldError("points", "give 'file' (a CSV of x,y rows) or 'points' ([[x, y], ...])")
         if self.file is not None:
             raise FieldError("file", "give only one of 'file' and 'points'")
+        for name in ("times", "yaws", "speeds"):
+            column = getattr(self, name)
+            if column is not None and len(column) != len(self.points):
+                raise FieldError(name, f"has {len(column)} values for {len(self.points)} points; give one per point")
+        if self.times is not None and self.corner_radius > 0.0:
+            raise FieldError(
+                "corner_radius",
+                "a timed path (t or v column, or times) passes through each point at its time and has no fillets",
+                "remove corner_radius, or the t and v columns for a path at constant speed",
+            )
+        if self.times is not None and self.loop:
+            raise FieldError("loop", "a timed path does not repeat", "remove loop, or the t and v columns")
         try:
             self.build()
         except ValueError as exc:  # names the bad point or leg
-            raise FieldError("points", str(exc)) from None
+            raise FieldError("points" if self.times is None else "times", str(exc)) from None
         return self
+
+    @property
+    def load_warnings(self) -> list[dict]:
+        """What loading changed, each ``{"code", "message"}`` (repeated points dropped)."""
+        return [{"code": "waypoints_repeated", "message": note} for note in self._notes]
 
     def build(self) -> Trajectory:
         assert self.points is not None, "a waypoint file is read into points when the scenario loads"
+        if self.times is not None:
+            return timed_path(self.times, self.points, yaws=self.yaws, speeds=self.speeds)
         return polyline_path(self.points, speed=self.speed, corner_radius=self.corner_radius, loop=self.loop)
+
+
+def _tidied(data: dict[str, Any], base: Path) -> tuple[dict[str, Any], str | None]:
+    """``data`` with its file read into rows, repeated points dropped and times derived from speeds (see
+    :func:`tidy_rows`), and the note on what was dropped; malformed inline values pass through for the fields'
+    own errors."""
+    name = data.get("file")
+    if name is not None and data.get("points") is None:
+        if not isinstance(name, str):
+            return data, None  # the type error is reported by the field
+        try:
+            read, note = tidy_rows(read_waypoint_rows(_contained(base, name)), f"waypoints file '{name}'")
+        except ValueError as exc:
+            message = str(exc)
+            if not message.startswith("waypoints file") and not message.startswith("'"):
+                message = f"waypoints file '{name}' {message}"
+            raise FieldError("file", message) from None
+        return {**data, **_inline(read), "file": None}, note
+    inline = _inline_rows(data)
+    if inline is None:  # TOML arrays -> [x, y] tuples, for the fields' own errors
+        points = data.get("points")
+        if isinstance(points, list):
+            data = {**data, "points": [tuple(p) if isinstance(p, list) else p for p in points]}
+        return data, None
+    try:
+        tidy, note = tidy_rows(inline, "trajectory.points")
+    except ValueError as exc:
+        raise FieldError("times" if "times" in data else "speeds", str(exc)) from None
+    return {**data, **_inline(tidy)}, note
+
+
+def _inline(rows: WaypointRows) -> dict[str, Any]:
+    return {"points": rows.points, "times": rows.times, "yaws": rows.yaws, "speeds": rows.speeds}
+
+
+def _inline_rows(data: dict[str, Any]) -> WaypointRows | None:
+    """The inline rows of ``data``, or None where a value is malformed (its field reports it)."""
+
+    def numbers(value: Any) -> bool:
+        return isinstance(value, list | tuple) and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+        )
+
+    points = data.get("points")
+    if not isinstance(points, list) or not all(numbers(p) and len(p) == 2 for p in points):
+        return None
+    columns = [data.get(name) for name in ("times", "yaws", "speeds")]
+    if not all(c is None or (numbers(c) and len(c) == len(points)) for c in columns):
+        return None
+    if data.get("speeds") is not None and any(v < 0.0 for v in data["speeds"]):
+        return None
+    pairs = [(float(p[0]), float(p[1])) for p in points]
+    times, yaws, speeds = ([float(v) for v in c] if c is not None else None for c in columns)
+    return WaypointRows(pairs, times, yaws, speeds)
 
 
 def _contained(base: Path, name: str) -> Path:
@@ -177,32 +261,3 @@ def _contained(base: Path, name: str) -> Path:
             "the scenario and give its file name"
         )
     return path
-
-
-def read_waypoints(path: Path) -> list[Pair]:
-    """Read x,y rows from a CSV file: ``#`` comment lines and blank lines anywhere, then one optional header line
-    before the first point (``x,y``)."""
-    try:
-        text = read_input(path).decode("utf-8")
-    except FileNotFoundError:
-        raise ValueError(f"waypoints file '{path}' does not exist") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"waypoints file '{path}' is not UTF-8 text; give a CSV of x,y rows") from None
-    except OSError as exc:
-        raise ValueError(f"waypoints file '{path}' cannot be read ({exc.strerror})") from None
-    points, header_seen = [], False
-    for number, row in enumerate(csv.reader(text.splitlines()), start=1):
-        if not row or all(not cell.strip() for cell in row) or row[0].lstrip().startswith("#"):
-            continue  # a blank line or a comment
-        try:
-            if len(row) != 2:
-                raise ValueError
-            points.append((float(row[0]), float(row[1])))
-        except ValueError:
-            if not points and not header_seen:
-                header_seen = True
-                continue  # a header line
-            raise ValueError(
-                f"waypoints file '{path}' line {number}: expected two numbers 'x,y', got {','.join(row)[:40]!r}"
-            ) from None
-    return points

@@ -4,6 +4,7 @@ from .base import ParametricCurve, Reference, Trajectory
 from .curves import Circle, FigureEight, Line, Sinusoid
 from .paths import PiecewisePath, polyline_path, square
 from .sampled import SampledTrajectory, unicycle_reference
+from .timed import TimedPath, timed_path, trapezoid_times
 
 __all__ = [
     "Circle",
@@ -14,8 +15,11 @@ __all__ = [
     "Reference",
     "SampledTrajectory",
     "Sinusoid",
+    "TimedPath",
     "Trajectory",
     "polyline_path",
     "square",
+    "timed_path",
+    "trapezoid_times",
     "unicycle_reference",
 ]
