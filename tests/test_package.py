@@ -42,7 +42,7 @@ LAYERS = [
     {"rundir"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},
-    {"suite", "robot_suite"},
+    {"suite", "robot_suite", "sysid"},
     {"cluster"},
     {"cli"},
 ]

@@ -23,7 +23,7 @@ import datetime
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -103,7 +103,7 @@ def export_run(
     origin = _origin_nanoseconds(folder, start)
     plant = scenario.plant_params()
     wheels = wheel_signals(columns, half_axle=plant.half_axle, wheel_radius=plant.wheel_radius)
-    counts = _write_bag_atomically(to, columns, wheels, origin, twist_stamped=twist_stamped)
+    counts = write_bag(to, bag_messages(columns, wheels, origin, twist_stamped=twist_stamped))
     return Export(to, len(columns["t"]), counts)
 
 
@@ -256,11 +256,11 @@ def _odometry(nanoseconds: int, pose: Any, v: float, omega: float) -> Any:
     )
 
 
-def _write_bag_atomically(
-    to: Path, columns: Mapping[str, np.ndarray], wheels: Mapping[str, np.ndarray], origin: int, *, twist_stamped: bool
-) -> dict[str, int]:
-    """Write the bag in a hidden sibling folder, then move it (its MCAP file, or the whole rosbag2 folder) into
-    place: a failure midway leaves nothing behind."""
+def write_bag(to: Path, messages: Iterable[tuple[str, str, int, Any]]) -> dict[str, int]:
+    """Write ``messages`` (topic, type, time [ns], message) as a rosbag2 with MCAP storage: one ``.mcap`` file when
+    ``to`` has that suffix, else a rosbag2 folder. The bag is written in a hidden sibling folder and then moved into
+    place (the MCAP file, or the whole folder): a failure midway leaves nothing behind. Returns the messages per
+    topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     parent = to.parent if str(to.parent) else Path(".")
@@ -274,7 +274,7 @@ def _write_bag_atomically(
     try:
         with Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
             connections: dict[str, Any] = {}
-            for topic, msgtype, nanoseconds, msg in bag_messages(columns, wheels, origin, twist_stamped=twist_stamped):
+            for topic, msgtype, nanoseconds, msg in messages:
                 if topic not in connections:
                     connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
                 writer.write(connections[topic], nanoseconds, store.serialize_cdr(msg, msgtype))

@@ -48,19 +48,21 @@ def motor_velocity_plant(params: RobotParams, scenario: Any) -> VelocityDrivenPl
 
 
 def lag_plant(params: RobotParams, scenario: Any) -> LagPlant:
-    """The identified velocity-lag model of the scenario's ``[robot] preset`` (model.md §1.8), limited to the
-    preset's top speed and yaw rate; the robot's own parameters do not enter it."""
+    """The identified velocity-lag model (model.md §1.8): ``plant.lag``, else the ``[robot] preset``'s, limited to the
+    preset's top speed and yaw rate (none without a preset); the robot's own parameters do not enter it."""
     from ..robots import PRESETS
 
     name = scenario.robot.preset
     robot = PRESETS.get(name) if name is not None else None
-    if robot is None or robot.lag is None:
+    theta = scenario.plant.lag if scenario.plant.lag is not None else (robot.lag if robot is not None else None)
+    if theta is None:
         identified = sorted(key for key, value in PRESETS.items() if value.lag is not None)
         raise ConfigError(
             "plant.model",
             "'lag' needs the robot's identified velocity-lag model, and "
             + (f"preset '{name}' has none" if name is not None else "[robot] names no preset"),
-            "set robot.preset to an identified robot: " + ", ".join(identified),
+            "give plant.lag (theta_1..theta_6, e.g. from `ddtrack identify`), or set robot.preset to an identified "
+            "robot: " + ", ".join(identified),
         )
-    top = (robot.max_speed, robot.max_yaw_rate)
-    return lag_plant_model(robot.lag, *(limit if limit is not None else float("inf") for limit in top))(params)
+    top = (robot.max_speed, robot.max_yaw_rate) if robot is not None else (None, None)
+    return lag_plant_model(theta, *(limit if limit is not None else float("inf") for limit in top))(params)

@@ -164,6 +164,13 @@ class PlantConfig(_Section):
     wheel_inertia: Annotated[float, Field(ge=0.0, le=10.0)] | None = Field(
         None, description="True spin inertia J_w of each wheel, wheel plus N^2 J_rotor [kg m^2]."
     )
+    lag: tuple[Positive, Positive, float, float, float, float] | None = Field(
+        None,
+        description=(
+            "theta_1..theta_6 [s, s, s m/rad^2, 1, s/m, 1] of model 'lag' (the identified velocity lags, e.g. from "
+            "`ddtrack identify`); default the [robot] preset's identified set."
+        ),
+    )
     velocity_pi: tuple[NonNegative, NonNegative] = Field(
         (2.0, 50.0),
         description=(
@@ -205,6 +212,10 @@ class PlantConfig(_Section):
 
         if not is_plant(self.model):
             raise FieldError("model", f"unknown plant '{self.model}'", did_you_mean(self.model, plant_kinds()))
+        if self.lag is not None and self.model != "lag":
+            raise FieldError(
+                "lag", f"is read only by model 'lag', not '{self.model}'", 'set model = "lag", or drop lag'
+            )
         return self
 
 

@@ -1,0 +1,155 @@
+"""The identification commands: ``excite`` (a plan to drive on the robot) and ``identify`` (its lag model from the
+log), docs/identification.md."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+
+from ..errors import ConfigError
+from . import cli, overwrite_option
+
+
+@cli.command(short_help="Write a plan of timed cmd_vel commands that makes a robot's log identify it.")
+@click.option("--preset", metavar="NAME", help="Take the top speed and yaw rate of this robot (`ddtrack list robots`).")
+@click.option("--max-speed", type=click.FloatRange(min=0.0, min_open=True), metavar="V", help="Top speed [m/s].")
+@click.option(
+    "--max-yaw-rate", type=click.FloatRange(min=0.0, min_open=True), metavar="W", help="Top yaw rate [rad/s]."
+)
+@click.option("--fraction", type=click.FloatRange(0.05, 1.0), default=0.6, show_default=True, help="Of the top speeds.")
+@click.option("--duration", type=click.FloatRange(8.0, 3600.0), default=60.0, show_default=True, help="[s]")
+@click.option(
+    "--rate", type=click.FloatRange(1.0, 1000.0), default=20.0, show_default=True, help="Commands per second."
+)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Draws the step levels.")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    required=True,
+    metavar="FILE",
+    help="FILE.csv (t, v, omega) or FILE.mcap / a folder name (a bag of /cmd_vel for `ros2 bag play`).",
+)
+@click.option("--start", type=float, metavar="SECONDS", help="Stamp of t = 0 in a bag [default: now].")
+@overwrite_option
+def excite(
+    preset: str | None,
+    max_speed: float | None,
+    max_yaw_rate: float | None,
+    fraction: float,
+    duration: float,
+    rate: float,
+    seed: int,
+    out: Path,
+    start: float | None,
+    overwrite: bool,
+) -> int:
+    """Write an excitation plan: held steps of forward speed, then of yaw rate, then arcs of both, within --fraction
+    of the robot's top speeds. Drive it on the robot while recording /cmd_vel and /odom, then `ddtrack identify`
+    the bag."""
+    import time
+
+    from ..outdir import atomic_write
+    from ..ros import check_target, write_bag
+    from ..sysid import excitation_plan
+
+    top_speed, top_yaw_rate = _top_speeds(preset, max_speed, max_yaw_rate)
+    kind = out.suffix.lower()
+    if kind not in (".csv", ".mcap", ""):
+        raise ConfigError(
+            "--out", f"'{out}' has the suffix '{out.suffix}'", "give FILE.csv, FILE.mcap or a folder name"
+        )
+    check_target(out, overwrite=overwrite)
+    plan = excitation_plan(
+        max_speed=top_speed, max_yaw_rate=top_yaw_rate, duration=duration, rate=rate, seed=seed, fraction=fraction
+    )
+    if kind == ".csv":
+        table = zip(plan.t.tolist(), plan.v.tolist(), plan.omega.tolist(), strict=True)
+        rows = "".join(f"{t!r},{v!r},{w!r}\n" for t, v, w in table)
+        atomic_write(out, lambda file: file.write(("t,v,omega\n" + rows).encode()))
+    else:
+        from ..ros.messages import twist
+
+        origin = round((start if start is not None else time.time()) * 1e9)
+        messages = (
+            ("/cmd_vel", "geometry_msgs/msg/Twist", origin + round(t * 1e9), twist(v, w))
+            for t, v, w in zip(plan.t, plan.v, plan.omega, strict=True)
+        )
+        write_bag(out, messages)
+    click.echo(
+        f"wrote {out}: {len(plan.t)} commands over {duration:g} s, |v| <= {fraction * top_speed:.3g} m/s, "
+        f"|omega| <= {fraction * top_yaw_rate:.3g} rad/s; followed exactly it goes {plan.reach():.2g} m from the "
+        "start: clear that much floor around the robot"
+    )
+    return 0
+
+
+def _top_speeds(preset: str | None, max_speed: float | None, max_yaw_rate: float | None) -> tuple[float, float]:
+    """The top speed and yaw rate from the options, or from the preset where they are left out."""
+    if preset is not None:
+        from ..robots import preset as robot_preset
+
+        try:
+            robot = robot_preset(preset)
+        except ConfigError as exc:
+            raise ConfigError("--preset", exc.message, exc.suggestion) from None
+        max_speed = max_speed if max_speed is not None else robot.max_speed
+        max_yaw_rate = max_yaw_rate if max_yaw_rate is not None else robot.max_yaw_rate
+    if max_speed is None or max_yaw_rate is None:
+        missing = "--max-speed" if max_speed is None else "--max-yaw-rate"
+        raise ConfigError(
+            missing, "the robot's top speeds are needed", "give --preset NAME, or --max-speed and --max-yaw-rate"
+        )
+    return max_speed, max_yaw_rate
+
+
+@cli.command(short_help="Identify a velocity-commanded robot's lag model from a log.")
+@click.argument("log", metavar="LOG", type=click.Path(path_type=Path))
+@click.option(
+    "--cmd-topic", default="/cmd_vel", show_default=True, help="The commands, in a bag (Twist or TwistStamped)."
+)
+@click.option("--odom-topic", default="/odom", show_default=True, help="The measured speeds, in a bag (Odometry).")
+@click.option(
+    "--max-delay", type=click.FloatRange(0.0, 2.0), default=0.3, show_default=True, help="Command delays tried [s]."
+)
+@click.option("--out", type=click.Path(path_type=Path), metavar="FILE.toml", help="Write the [plant] fragment here.")
+@overwrite_option
+def identify(log: Path, cmd_topic: str, odom_topic: str, max_delay: float, out: Path | None, overwrite: bool) -> int:
+    """Fit the velocity-lag model (theta_1..theta_6) and the command delay to LOG: a bag (a folder, .mcap or .db3:
+    /cmd_vel and /odom), a CSV or Parquet table (t, v_cmd, omega_cmd, v, omega), or a run folder. Prints each
+    parameter with its 95 % interval, the fit on the held-out last quarter, and what the log could not separate."""
+    from ..outdir import atomic_write
+    from ..ros import check_target
+    from ..sysid import NAMES, UNITS, identify_lag, read_speed_log
+
+    if out is not None:
+        if out.suffix.lower() != ".toml":
+            raise ConfigError("--out", f"'{out}' is not a .toml file", "give FILE.toml")
+        check_target(out, overwrite=overwrite)
+    speed_log = read_speed_log(log, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    fit = identify_lag(speed_log, max_delay=max_delay)
+    lines = [f"# ddtrack identify {log}: the velocity-lag model (docs/identification.md), 95 % intervals"]
+    for name, unit, value, sigma in zip(NAMES, UNITS, fit.theta, fit.std, strict=True):
+        lines.append(f"#   {name} = {value:.6g} +- {1.96 * sigma:.2g} [{unit}]")
+    lag_v, lag_w = fit.time_constants
+    lines += [
+        f"#   lags {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); command delay {fit.delay:.3g} s; speeds read as "
+        + ("means over each sample interval (odometry)" if fit.interval_mean else "instantaneous"),
+        f"#   fit on the held-out last quarter ({fit.samples[1]} samples): v {fit.fit_percent['v']:.1f} %, "
+        f"omega {fit.fit_percent['omega']:.1f} %; residual spread {fit.noise[0]:.2g} m/s, {fit.noise[1]:.2g} rad/s",
+        *(f"#   note: {note}" for note in fit.notes),
+        "[plant]",
+        'model = "lag"',
+        "lag = [" + ", ".join(repr(float(value)) for value in fit.theta) + "]",
+    ]
+    if fit.delay > 0:
+        lines += ["[sensing]", f"actuation_delay = {fit.delay!r}"]
+    text = "\n".join(lines) + "\n"
+    click.echo(text, nl=False)
+    if out is not None:
+        atomic_write(out, lambda file: file.write(text.encode()))
+        click.echo(f"wrote {out}")
+    if not math.isfinite(fit.fit_percent["v"]) or min(fit.fit_percent.values()) < 50:
+        click.echo("warning: the model predicts the held-out speeds poorly (fit below 50 %)", err=True)
+    return 0

@@ -1,0 +1,108 @@
+"""Logs to identify from: a ROS 2 bag (``/cmd_vel`` and ``/odom``), or a table (CSV or Parquet) with the columns
+``t, v_cmd, omega_cmd, v, omega`` (a ``ddtrack run`` folder's ``timeseries.parquet``, or ``ddtrack export``'s CSV,
+whose ``name [unit]`` headers are read by name)."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+from .lag import SpeedLog
+
+COLUMNS = ("t", "v_cmd", "omega_cmd", "v", "omega")
+TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
+
+
+def read_speed_log(path: Path, *, cmd_topic: str = "/cmd_vel", odom_topic: str = "/odom") -> SpeedLog:
+    """The commands and measured speeds of ``path``: a bag (a folder, ``.mcap`` or ``.db3``), ``.csv`` or
+    ``.parquet``; a run folder reads its ``timeseries.parquet``."""
+    if path.is_dir() and (path / "timeseries.parquet").is_file():
+        path = path / "timeseries.parquet"
+    suffix = path.suffix.lower()
+    if suffix in (".csv", ".parquet"):
+        return _table_log(path)
+    if path.is_dir() or suffix in (".mcap", ".db3"):
+        return bag_log(path, cmd_topic=cmd_topic, odom_topic=odom_topic)
+    raise ConfigError("LOG", f"'{path}' is neither a bag nor a .csv or .parquet table", "give one of those")
+
+
+def bag_log(path: Path, *, cmd_topic: str, odom_topic: str) -> SpeedLog:
+    """Measured speeds at each odometry stamp, with the velocity command last received at or before it (a base
+    holds cmd_vel until the next one). Samples before the first command are dropped."""
+    from ..ros.messages import stamp_nanoseconds
+    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
+
+    with open_bag(path) as reader:
+        commands = topic_messages(reader, cmd_topic, TWIST_TYPES, option="--cmd-topic")
+        odometry = topic_messages(reader, odom_topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
+
+    def command_time(bag_time: int, msg: object) -> int:
+        stamped = stamp_nanoseconds(msg.header) if hasattr(msg, "header") else 0
+        return stamped if stamped > 0 else bag_time
+
+    sent = np.array([command_time(bag_time, msg) for bag_time, msg in commands], dtype=np.int64)
+    twists = [msg.twist if hasattr(msg, "header") else msg for _, msg in commands]
+    values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
+    order = np.argsort(sent, kind="stable")  # receive order can differ from stamp order
+    sent, values = sent[order], values[order]
+    measured_at = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in odometry], dtype=np.int64)
+    speeds = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for _, m in odometry], dtype=float)
+    latest = np.searchsorted(sent, measured_at, side="right") - 1
+    valid = latest >= 0
+    if valid.sum() == 0:
+        raise ConfigError("LOG", f"'{path}': every odometry message comes before the first command", "")
+    t = (measured_at[valid] - measured_at[valid][0]) / 1e9
+    source = f"'{path}' ({cmd_topic}, {odom_topic})"
+    return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source)
+
+
+def _table_log(path: Path) -> SpeedLog:
+    if not path.is_file():
+        raise ConfigError("LOG", f"'{path}' does not exist", "give a bag, a .csv or a .parquet file")
+    if path.suffix.lower() == ".parquet":
+        import pyarrow.parquet as pq
+
+        try:
+            table = pq.read_table(path)
+        except (OSError, ValueError) as exc:
+            raise ConfigError("LOG", f"'{path}' cannot be read as Parquet ({exc})") from None
+        columns = {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
+    else:
+        columns = _csv_columns(path)
+    missing = [name for name in COLUMNS if name not in columns]
+    if missing:
+        raise ConfigError(
+            "LOG",
+            f"'{path}' lacks the columns {', '.join(missing)}",
+            "a log needs t [s], v_cmd [m/s], omega_cmd [rad/s] (the commands) and v, omega (the measured speeds)",
+        )
+    column = lambda name: np.asarray(columns[name], dtype=float)  # noqa: E731
+    return SpeedLog(
+        t=column("t"),
+        command=np.column_stack([column("v_cmd"), column("omega_cmd")]),
+        speed=np.column_stack([column("v"), column("omega")]),
+        source=f"'{path}'",
+    )
+
+
+def _csv_columns(path: Path) -> dict[str, np.ndarray]:
+    """A CSV's columns by name (``name [unit]`` headers read as ``name``; ``#`` lines skipped)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError("LOG", f"'{path}' cannot be read ({exc})") from None
+    rows = [row for row in csv.reader(io.StringIO(text)) if row and not row[0].lstrip().startswith("#")]
+    if len(rows) < 2:
+        raise ConfigError("LOG", f"'{path}' has no data rows", "give a header line and one row per sample")
+    names = [cell.split(" [")[0].strip() for cell in rows[0]]
+    try:
+        values = np.array(rows[1:], dtype=float)
+    except ValueError:
+        raise ConfigError("LOG", f"'{path}' has a cell that is not a number, or rows of unequal length") from None
+    if values.ndim != 2 or values.shape[1] != len(names):
+        raise ConfigError("LOG", f"'{path}': rows of {values.shape[-1]} cells under a header of {len(names)}")
+    return {name: values[:, i] for i, name in enumerate(names)}

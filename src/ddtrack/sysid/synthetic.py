@@ -1,0 +1,55 @@
+"""Logs from a known lag model, to check identification against the truth (docs/identification.md).
+
+The base follows ``theta`` under the plan's commands, each acting ``delay`` s after it was sent; what it logs is
+either its speeds plus white noise, or, with ``encoder_counts``, the speeds that odometry derives from quantised
+wheel angles over each sample interval (so the log is also a little late and coarse, as a real one is).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .excitation import Plan
+from .lag import SpeedLog, simulate_speeds
+
+FINE = 10  #: simulation points per sample interval
+
+
+def lag_log(
+    theta: np.ndarray,
+    plan: Plan,
+    *,
+    noise: tuple[float, float] = (0.0, 0.0),
+    delay: float = 0.0,
+    encoder_counts: int | None = None,
+    wheel_radius: float = 0.0975,
+    half_axle: float = 0.1655,
+    seed: int = 0,
+) -> SpeedLog:
+    """The log of a base with lag model ``theta`` driven by ``plan``: the commands as sent, the speeds as measured
+    (``noise`` = std of v [m/s] and omega [rad/s]; ``encoder_counts`` per wheel revolution, with the wheel radius
+    [m] and half axle [m]); ``delay`` [s] between a command and its effect."""
+    step = float(np.median(np.diff(plan.t)))
+    fine_t = np.arange(len(plan.t) * FINE + 1) * (step / FINE)
+    sent = np.column_stack([plan.v, plan.omega])
+    acting = np.searchsorted(plan.t, fine_t - delay + 1e-12, side="right") - 1  # the last command sent by then
+    command = np.where((acting >= 0)[:, None], sent[np.clip(acting, 0, None)], 0.0)
+    truth = simulate_speeds(np.asarray(theta, dtype=float), fine_t, command, np.zeros(2))
+    rng = np.random.default_rng(seed)
+    if encoder_counts is None:
+        measured = truth[::FINE][: len(plan.t)] + rng.normal(size=(len(plan.t), 2)) * np.asarray(noise)
+        return SpeedLog(t=plan.t, command=sent, speed=measured, source="synthetic lag log")
+    wheel_rates = np.column_stack([truth[:, 0] + half_axle * truth[:, 1], truth[:, 0] - half_axle * truth[:, 1]])
+    wheel_rates = wheel_rates / wheel_radius
+    angles = np.concatenate(
+        [np.zeros((1, 2)), np.cumsum(0.5 * (wheel_rates[1:] + wheel_rates[:-1]) * (step / FINE), axis=0)]
+    )
+    tick = 2 * np.pi / encoder_counts
+    counted = np.floor(angles[::FINE][: len(plan.t) + 1] / tick) * tick
+    rates = np.diff(counted, axis=0) / step  # each wheel's mean rate over the interval ending at the sample
+    v = wheel_radius * (rates[:, 0] + rates[:, 1]) / 2
+    omega = wheel_radius * (rates[:, 0] - rates[:, 1]) / (2 * half_axle)
+    measured = np.column_stack([v, omega]) + rng.normal(size=(len(plan.t), 2)) * np.asarray(noise)
+    t = plan.t + step  # a rate is known at the end of its interval, when the next command has just been sent
+    in_force = sent[np.minimum(np.arange(len(plan.t)) + 1, len(plan.t) - 1)]
+    return SpeedLog(t=t, command=in_force, speed=measured, source="synthetic lag log with encoders")

@@ -1,0 +1,149 @@
+"""Identifying a velocity-commanded base (docs/identification.md): the lag model recovered from synthetic logs of a
+known plant within its reported uncertainty, excitation plans within the robot's limits, and logs that cannot
+identify anything refused with one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from ddtrack.errors import ConfigError
+from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
+from ddtrack.ros.messages import header, message, planar_pose, twist, typestore
+from ddtrack.sysid import SpeedLog, excitation_plan, identify_lag, lag_log
+
+THETA = np.array(PIONEER_3DX_WITH_LASER)
+PLAN = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=60.0, rate=20.0, seed=0)
+SEEDS = range(20)
+
+
+def z_scores(**conditions) -> tuple[np.ndarray, list]:
+    fits = [identify_lag(lag_log(THETA, PLAN, seed=seed, **conditions), max_delay=0.15) for seed in SEEDS]
+    return np.array([(fit.theta - THETA) / fit.std for fit in fits]), fits
+
+
+@pytest.mark.parametrize(
+    ("conditions", "delay", "interval_mean"),
+    [
+        ({"noise": (0.005, 0.01), "delay": 0.1}, 0.1, False),
+        ({"noise": (0.002, 0.005), "encoder_counts": 2000, "delay": 0.05}, 0.05, True),
+    ],
+    ids=["noise-and-latency", "encoders-noise-and-latency"],
+)
+def test_the_lag_model_is_recovered_within_its_reported_uncertainty(conditions, delay, interval_mean):
+    z, fits = z_scores(**conditions)
+    covered = np.abs(z) <= 1.96
+    # 120 intervals at a nominal 95 %: below 85 % has probability < 1e-4 if the intervals are right
+    assert covered.mean() >= 0.85, np.round(z, 2)
+    assert np.all(np.abs(z) < 5), np.round(z, 2)  # and no estimate is far outside its interval
+    assert all(fit.delay == pytest.approx(delay, abs=1e-9) for fit in fits)
+    assert all(fit.interval_mean is interval_mean for fit in fits)  # odometry's interval means are recognised
+    assert min(min(fit.fit_percent.values()) for fit in fits) > 90.0
+
+
+def test_a_log_that_never_turns_while_driving_says_the_coupling_terms_are_not_separated():
+    plan = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=30.0, rate=20.0, seed=1)
+    arcs = plan.t >= 0.5 * plan.t[-1]  # the arcs phase: keep the turns but stop the robot while it turns
+    stopped = type(plan)(t=plan.t, v=np.where(arcs, 0.0, plan.v), omega=plan.omega)
+    fit = identify_lag(lag_log(THETA, stopped, seed=0, noise=(0.005, 0.01)))
+    named = " ".join(fit.notes)
+    assert "theta_5" in named and "theta_1" not in named and "theta_2" not in named
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda log: SpeedLog(log.t[:50], log.command[:50], log.speed[:50], "log"), "has 50 samples"),
+        (lambda log: SpeedLog(log.t, log.command * [1, 0], log.speed, "log"), "omega command never changes"),
+        (lambda log: SpeedLog(log.t[::-1], log.command, log.speed, "log"), "time does not increase at sample 1"),
+        (lambda log: SpeedLog(log.t, log.command, log.speed * np.nan, "log"), "NaN"),
+    ],
+)
+def test_logs_that_cannot_identify_are_refused(change, message):
+    log = lag_log(THETA, PLAN, seed=0, noise=(0.005, 0.01))
+    with pytest.raises(ConfigError, match=message):
+        identify_lag(change(log))
+
+
+def test_the_plan_drives_then_turns_then_arcs_within_the_limits():
+    plan = excitation_plan(max_speed=0.22, max_yaw_rate=2.84, duration=40.0, rate=20.0, seed=3, fraction=0.5)
+    assert np.all(np.abs(plan.v) <= 0.5 * 0.22 + 1e-15) and np.all(np.abs(plan.omega) <= 0.5 * 2.84 + 1e-15)
+    quarter = (plan.t[-1] - 2.0) / 4
+    first, second = plan.t < 1.0 + quarter, (plan.t >= 1.0 + quarter) & (plan.t < 1.0 + 2 * quarter)
+    assert np.all(plan.omega[first] == 0) and np.ptp(plan.v[first]) > 0.05
+    assert np.all(plan.v[second] == 0) and np.ptp(plan.omega[second]) > 0.5
+    arcs = plan.t >= 1.0 + 2 * quarter
+    assert np.mean((plan.v[arcs] != 0) & (plan.omega[arcs] != 0)) > 0.8
+    again = excitation_plan(max_speed=0.22, max_yaw_rate=2.84, duration=40.0, rate=20.0, seed=3, fraction=0.5)
+    assert np.array_equal(again.v, plan.v) and np.array_equal(again.omega, plan.omega)
+
+
+def write_log_bag(path, log, *, cmd_topic="/cmd_vel") -> None:
+    """A bag of what a base records: the commands on ``cmd_topic`` as sent, its odometry's twist at each sample."""
+    store = typestore()
+    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        commands = writer.add_connection(cmd_topic, "geometry_msgs/msg/Twist", typestore=store)
+        odometry = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=store)
+        for t, (v_cmd, w_cmd), (v, w) in zip(log.t, log.command, log.speed, strict=True):
+            ns = 1_700_000_000_000_000_000 + round(t * 1e9)
+            writer.write(commands, ns, store.serialize_cdr(twist(v_cmd, w_cmd), "geometry_msgs/msg/Twist"))
+            odom = message(
+                "nav_msgs/msg/Odometry",
+                header=header(ns, "odom"),
+                child_frame_id="base_link",
+                pose=message(
+                    "geometry_msgs/msg/PoseWithCovariance", pose=planar_pose(0, 0, 0), covariance=np.zeros(36)
+                ),
+                twist=message("geometry_msgs/msg/TwistWithCovariance", twist=twist(v, w), covariance=np.zeros(36)),
+            )
+            writer.write(odometry, ns + 1, store.serialize_cdr(odom, "nav_msgs/msg/Odometry"))
+
+
+def test_identify_a_bag_writes_a_plant_that_a_scenario_runs(tmp_path, cli):
+    from ddtrack.scenario import load_scenario
+
+    log = lag_log(THETA, PLAN, seed=4, noise=(0.005, 0.01), delay=0.1)
+    bag = tmp_path / "log"
+    write_log_bag(bag, log)
+    out = tmp_path / "pioneer.toml"
+    code, printed, _ = cli("identify", bag, "--out", out)
+    assert code == 0 and "command delay 0.1 s" in printed and f"wrote {out}" in printed
+    fragment = out.read_text()
+    assert '[plant]\nmodel = "lag"\nlag = [' in fragment and "[sensing]\nactuation_delay = 0.1\n" in fragment
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(
+        'name = "identified"\n[simulation]\nduration = 2.0\ncontrol_period = 0.05\nmetric_window = [0.0, 2.0]\n'
+        + fragment
+        + '[trajectory]\nkind = "line"\nspeed = 0.3\n[controller]\nkind = "kinematic_backstepping"\n'
+    )
+    spec = load_scenario(scenario)
+    assert np.allclose(spec.plant.lag, THETA, rtol=0.05, atol=0.01)
+    code, _, err = cli("identify", bag, "--cmd-topic", "/cmd_vl")
+    assert code == 2 and "did you mean '/cmd_vel'?" in err
+
+
+def test_identify_refuses_a_table_without_the_columns_and_writes_nothing(tmp_path, cli):
+    table = tmp_path / "log.csv"
+    table.write_text("t,v,omega\n" + "".join(f"{k * 0.05},0,0\n" for k in range(100)))
+    out = tmp_path / "fit.toml"
+    code, _, err = cli("identify", table, "--out", out)
+    assert code == 2 and "lacks the columns v_cmd, omega_cmd" in err and not out.exists()
+
+
+def test_excite_writes_a_csv_and_a_bag_of_timed_commands(tmp_path, cli):
+    from rosbags.highlevel import AnyReader
+
+    csv_out, bag_out = tmp_path / "plan.csv", tmp_path / "plan.mcap"
+    code, printed, _ = cli("excite", "--preset", "turtlebot3_burger", "--duration", "20", "--out", csv_out)
+    assert code == 0 and "clear that much floor" in printed
+    rows = np.loadtxt(csv_out, delimiter=",", skiprows=1)
+    assert rows.shape == (400, 3) and np.max(np.abs(rows[:, 1])) <= 0.6 * 0.22 + 1e-12
+    assert (
+        cli("excite", "--preset", "turtlebot3_burger", "--duration", "20", "--out", bag_out, "--start", "1e9")[0] == 0
+    )
+    with AnyReader([bag_out], default_typestore=typestore()) as reader:
+        stamps = [t for _, t, _ in reader.messages()]
+    assert len(stamps) == 400 and stamps[1] - stamps[0] == 50_000_000
+    code, _, err = cli("excite", "--preset", "turtlebot3_burgr", "--out", tmp_path / "x.csv")
+    assert code == 2 and "did you mean 'turtlebot3_burger'?" in err and not (tmp_path / "x.csv").exists()
