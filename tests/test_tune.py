@@ -85,3 +85,41 @@ def test_tune_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("tune", SCENARIOS / "paper_line.toml", *args, "--out", tmp_path / "tune")
     assert code == 2 and stderr.startswith(f"error: {field}"), stderr
     assert not (tmp_path / "tune").exists()
+
+
+CMD_VEL = """name = "pioneer_cmd_vel"
+[simulation]
+duration = 3.0
+control_period = 0.05
+metric_window = [1.0, 3.0]
+[robot]
+preset = "pioneer_3dx"
+[plant]
+model = "lag"
+[trajectory]
+kind = "line"
+speed = 0.4
+[initial]
+pose = [0.0, 0.3, 0.0]
+[controller]
+kind = "backstepping"
+inner = "none"
+"""
+
+
+def test_gains_of_a_law_over_cmd_vel_are_tuned_through_a_velocity_plant(tmp_path, cli):
+    """Over cmd_vel (inner = "none") on the Pioneer's identified lags: the same gradient check, and the effort term,
+    which integrates wheel torques that such a law never commands, is refused."""
+    path = tmp_path / "pioneer.toml"
+    path.write_text(CMD_VEL)
+    training = problems([ddtrack.load_scenario(path)], [0])
+    gamma = jnp.asarray(DEFAULT_GAMMA)
+    log_gains = np.log([1.5, 40.0, 10.0])
+    import jax
+
+    analytic = np.asarray(jax.grad(lambda lg: total_loss(training, lg, gamma, 0.0))(jnp.asarray(log_gains)))
+    numeric = central_difference(lambda lg: float(total_loss(training, jnp.asarray(lg), gamma, 0.0)), log_gains, 1e-5)
+    assert np.all(np.abs(analytic) > 0)
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-5)
+    code, _, stderr = cli("tune", path, "--effort-weight", "0.1", "--steps", "1", "--out", tmp_path / "tune")
+    assert code == 2 and stderr.startswith("error: --effort-weight") and not (tmp_path / "tune").exists()

@@ -75,13 +75,6 @@ def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Proble
                 f"'{scenario.controller.kind}' has no tunable gains here",
                 f"tune one of: {', '.join(tunable)}",
             )
-        if controller_output(scenario.controller) != "torque":  # the rollouts differentiate through the torque loop
-            raise ConfigError(
-                "controller.inner",
-                f"'{scenario.controller.kind}' outputs velocity commands here (inner = \"none\"): tune tunes gains "
-                "over the torque plant",
-                'tune it over an inner loop (inner = "computed_torque" or "pd")',
-            )
     return [
         Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
         for scenario in scenarios
@@ -145,6 +138,12 @@ def tune(
 
     A step whose loss or gradient is not finite (a run that blew up) is undone and the step size halved.
     """
+    if effort_weight > 0 and any(controller_output(p.scenario.controller) != "torque" for p in training):
+        raise ConfigError(
+            "--effort-weight",
+            "the effort term integrates wheel torques, and a controller over cmd_vel (inner = \"none\") commands none",
+            "drop --effort-weight, or tune over an inner loop",
+        )
     gamma_array = jnp.asarray(gamma, float)
     loss_and_grad = jax.jit(
         jax.value_and_grad(lambda lg: total_loss(training, lg, gamma_array, effort_weight, whole_run))
