@@ -43,9 +43,12 @@ def registered():
     del registry._KINDS["test_kanayama"]  # the golden and determinism tests go over every registered kind
 
 
+PLANS = {"replay": {"times": [0.0], "commands": [[0.0, 0.0]]}}  # the keys a kind cannot do without
+
+
 def _scenario_file(tmp_path, kind: str):
     data = tomllib.loads((SCENARIOS / "paper_line.toml").read_text())
-    data["controller"] = {"kind": kind}
+    data["controller"] = {"kind": kind, **PLANS.get(kind, {})}
     path = tmp_path / "scenario.toml"
     path.write_text(tomli_w.dumps(data))
     return path

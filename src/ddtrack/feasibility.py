@@ -3,7 +3,8 @@
 :func:`check` refuses (with :class:`ConfigError`, exit code 2) a reference the robot cannot follow because it asks
 for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a robot clamped at 0.22 m/s ran "ok" with
 1.89 m of error), an angle beyond 2 pi (``heading = 45`` is almost surely degrees; it ran as a 58.3 deg line), and
-masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams). It returns
+masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams), and an
+open-loop plan beyond the top speed or yaw rate of the ``robot.preset``. It returns
 warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp or beyond the top speed or yaw rate
 of the ``robot.preset``, and what loading the trajectory changed (repeated waypoints dropped).
 """
@@ -131,6 +132,16 @@ def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
     return warnings
 
 
+def check_open_loop(scenario: Any) -> None:
+    """Refuse an open-loop controller's plan (``[controller] kind = "replay"``, through its ``check_within``) that
+    commands more than the top speed or yaw rate of the ``robot.preset``: unlike a reference, no clamp stands between
+    the plan and the plant, and a log of it would describe a robot that does not exist."""
+    within = getattr(scenario.controller, "check_within", None)
+    robot = scenario.robot.preset_robot()
+    if callable(within) and robot is not None:
+        within(robot.max_speed, robot.max_yaw_rate, robot.name)
+
+
 def check_angles(scenario: Any) -> None:
     """Refuse an angle beyond 2 pi, naming it in degrees and radians."""
     angles = []
@@ -167,6 +178,7 @@ def check(scenario: Any) -> list[dict]:
     """Run every check on a validated scenario; return the warnings (raise :class:`ConfigError` on a refusal)."""
     check_angles(scenario)
     check_units(scenario)
+    check_open_loop(scenario)
     peaks = reference_peaks(scenario)
     loading = list(getattr(scenario.trajectory, "load_warnings", []))  # e.g. repeated waypoints dropped
     return [*loading, *check_clamps(scenario, peaks), *check_robot_limits(scenario, peaks)]

@@ -1,4 +1,4 @@
-"""Controllers: the protocol, inner loops and Kanayama backstepping (model.md §2)."""
+"""Controllers: the protocol, inner loops, Kanayama backstepping (model.md §2) and the open-loop replay."""
 
 from .backstepping import (
     KANAYAMA_GAINS,
@@ -24,6 +24,7 @@ from .nn_adaptive import (
     gain_sensitivity,
     one_step_coefficient,
 )
+from .replay import Replay
 
 __all__ = [
     "KANAYAMA_GAINS",
@@ -39,6 +40,7 @@ __all__ = [
     "Emulator",
     "Logs",
     "NNAdaptiveBackstepping",
+    "Replay",
     "Scales",
     "TorqueLaw",
     "VelocityCommand",

@@ -37,6 +37,7 @@ from .baseline_configs import (
 )
 from .controller_configs import BacksteppingConfig, NNAdaptiveConfig
 from .motor_configs import lag_plant, motor_torque_plant, motor_velocity_plant
+from .replay_config import ReplayConfig
 from .slip_configs import slip_plant_config, slip_velocity_plant_config
 from .trajectory_configs import (
     CircleTrajectory,
@@ -452,15 +453,10 @@ register_controller(RegulatedPurePursuitConfig, needs_reference=True)
 register_controller(AdaptiveBacksteppingConfig, has_kanayama_gains=True)
 register_controller(MPPIConfig, needs_reference=True)
 register_controller(AdaptiveCompensatorConfig, output="velocity")
-for _trajectory in (
-    LineTrajectory,
-    SquareTrajectory,
-    CircleTrajectory,
-    FigureEightTrajectory,
-    SinusoidTrajectory,
-    WaypointsTrajectory,
-):
+register_controller(ReplayConfig, output="velocity")
+for _trajectory in (LineTrajectory, SquareTrajectory, CircleTrajectory, FigureEightTrajectory, SinusoidTrajectory):
     register_trajectory(_trajectory)
+register_trajectory(WaypointsTrajectory)
 register_plant("dynamic", DynamicPlant, summary="The Lagrangian robot driven by wheel torques (the default).")
 register_plant(
     "motor_torque",

@@ -246,12 +246,13 @@ def _inline_rows(data: dict[str, Any]) -> WaypointRows | None:
     return WaypointRows(pairs, times, yaws, speeds)
 
 
-def _contained(base: Path, name: str) -> Path:
-    """``base / name``, refused (ValueError) unless it stays inside ``base``'s folder tree once ``..`` and symlinks
-    are resolved: a scenario, perhaps from someone else, can make ddtrack read only files beside it or below it."""
+def _contained(base: Path, name: str, *, what: str = "a waypoints file") -> Path:
+    """``base / name``, refused (ValueError, calling the file ``what``) unless it stays inside ``base``'s folder tree
+    once ``..`` and symlinks are resolved: a scenario, perhaps from someone else, can make ddtrack read only files
+    beside it or below it."""
     if Path(name).is_absolute():
         raise ValueError(
-            f"'{name}' is an absolute path; a waypoints file is read relative to the scenario file, "
+            f"'{name}' is an absolute path; {what} is read relative to the scenario file, "
             "inside its folder: copy the CSV beside the scenario and give its file name"
         )
     path = base / name

@@ -1,5 +1,6 @@
 """Waypoint rows: a CSV file's columns (t, x, y, yaw, v in any order, under a header) read with the line of each
-row, and the rows tidied for a path: repeated points dropped with a note, times derived from speeds."""
+row, and the rows tidied for a path: repeated points dropped with a note, times derived from speeds. The reader
+takes any columns of numbers (:func:`read_csv_columns`), so other files of rows (a replay plan) read alike."""
 
 from __future__ import annotations
 
@@ -52,36 +53,58 @@ class WaypointRows:
         )
 
 
-def read_waypoint_rows(path: Path) -> WaypointRows:
-    """Read waypoint rows from a CSV file: ``#`` comment lines and blank lines anywhere, then an optional header line
-    before the first row naming the columns (any order, from t, x, y, yaw, v; x and y required); without a header
-    the rows are x,y.
+@dataclass(frozen=True)
+class CsvColumns:
+    """The columns a CSV file of numbers may name in its header line (what messages call it, ``what``)."""
+
+    what: str  #: e.g. "waypoints file"
+    names: tuple[str, ...]  #: the columns a header may name, in the order messages list them
+    units: str  #: their units, as messages give them, e.g. "(t [s], v [m/s], omega [rad/s])"
+    required: tuple[str, ...]  #: the columns a header must name
+    headless: tuple[str, ...] | None = None  #: the columns of a file without a header; None: a header is required
+
+
+WAYPOINT_COLUMNS = CsvColumns(
+    "waypoints file", COLUMNS, "(t [s], x and y [m], yaw [rad], v [m/s])", ("x", "y"), headless=("x", "y")
+)
+
+
+def read_csv_columns(path: Path, table: CsvColumns) -> tuple[dict[str, list[float]], tuple[int, ...]]:
+    """Read the numbers of a CSV file by column: ``#`` comment lines and blank lines anywhere, then a header line
+    before the first row naming the columns (any order, from ``table.names``), optional where ``table.headless``
+    gives the columns of a file without one. Returns name -> column, and the file's line number of each row.
 
     Raises
     ------
     ValueError
-        Naming the file, the line and the fix: an unreadable file, an unknown or repeated column, a row with another
-        number of cells, or a cell that is not a finite number.
+        Naming the file, the line and the fix: an unreadable file, a missing, unknown or repeated column, a row
+        with another number of cells, or a cell that is not a finite number.
     """
     try:
         text = read_input(path).decode("utf-8")
     except FileNotFoundError:
-        raise ValueError(f"waypoints file '{path}' does not exist") from None
+        raise ValueError(f"{table.what} '{path}' does not exist") from None
     except UnicodeDecodeError:
-        raise ValueError(f"waypoints file '{path}' is not UTF-8 text; give a CSV of x,y rows") from None
+        shape = ",".join(table.headless or table.required)
+        raise ValueError(f"{table.what} '{path}' is not UTF-8 text; give a CSV of {shape} rows") from None
     except OSError as exc:
-        raise ValueError(f"waypoints file '{path}' cannot be read ({exc.strerror})") from None
+        raise ValueError(f"{table.what} '{path}' cannot be read ({exc.strerror})") from None
     names: list[str] | None = None
     rows: list[list[float]] = []
     numbers: list[int] = []
     for number, row in enumerate(csv.reader(text.splitlines()), start=1):
         if not row or all(not cell.strip() for cell in row) or row[0].lstrip().startswith("#"):
             continue  # a blank line or a comment
-        where = f"waypoints file '{path}' line {number}"
+        where = f"{table.what} '{path}' line {number}"
         if not rows and names is None and not all(_is_number(cell) for cell in row):
-            names = _header(row, where)
+            names = _header(row, where, table)
             continue
-        expected = names or ["x", "y"]
+        if names is None and table.headless is None:
+            raise ValueError(
+                f"{where}: a header line naming the columns {', '.join(table.required)} (any order) must come "
+                f"before the first row {table.units}"
+            )
+        expected = names or list(table.headless or ())
         if len(row) != len(expected) or not all(_is_number(cell) for cell in row):
             raise ValueError(
                 f"{where}: expected {len(expected)} numbers {','.join(expected)!r}, got {','.join(row)[:40]!r}"
@@ -91,13 +114,26 @@ def read_waypoint_rows(path: Path) -> WaypointRows:
             raise ValueError(f"{where}: {','.join(row)[:40]!r} holds NaN or inf; every cell must be a finite number")
         rows.append(values)
         numbers.append(number)
-    columns = {name: [r[i] for r in rows] for i, name in enumerate(names or ["x", "y"])}
+    columns = names or list(table.headless or table.required)
+    return {name: [r[i] for r in rows] for i, name in enumerate(columns)}, tuple(numbers)
+
+
+def read_waypoint_rows(path: Path) -> WaypointRows:
+    """Read waypoint rows from a CSV file (:func:`read_csv_columns`): an optional header line naming the columns
+    (any order, from t, x, y, yaw, v; x and y required); without a header the rows are x,y.
+
+    Raises
+    ------
+    ValueError
+        Naming the file, the line and the fix (see :func:`read_csv_columns`).
+    """
+    columns, numbers = read_csv_columns(path, WAYPOINT_COLUMNS)
     return WaypointRows(
         points=list(zip(columns["x"], columns["y"], strict=True)),
         times=columns.get("t"),
         yaws=columns.get("yaw"),
         speeds=columns.get("v"),
-        numbers=tuple(numbers),
+        numbers=numbers,
         word="line",
     )
 
@@ -115,21 +151,22 @@ def _is_number(cell: str) -> bool:
     return True
 
 
-def _header(row: list[str], where: str) -> list[str]:
-    """The column names of a header row, checked."""
+def _header(row: list[str], where: str, table: CsvColumns) -> list[str]:
+    """The column names of a header row, checked against ``table``."""
     names = [cell.strip().lower() for cell in row]
-    unknown = [name for name in names if name not in COLUMNS]
+    unknown = [name for name in names if name not in table.names]
     if unknown:
         raise ValueError(
-            f"{where}: unknown column {unknown[0]!r}; a header names columns from t, x, y, yaw, v "
-            "(t [s], x and y [m], yaw [rad], v [m/s]), and a data row holds numbers only"
+            f"{where}: unknown column {unknown[0]!r}; a header names columns from {', '.join(table.names)} "
+            f"{table.units}, and a data row holds numbers only"
         )
-    repeated = [name for name in COLUMNS if names.count(name) > 1]
+    repeated = [name for name in table.names if names.count(name) > 1]
     if repeated:
         raise ValueError(f"{where}: column {repeated[0]!r} is named twice; name each column once")
-    missing = [name for name in ("x", "y") if name not in names]
+    missing = [name for name in table.required if name not in names]
     if missing:
-        raise ValueError(f"{where}: the header has no {missing[0]!r} column; x and y are required")
+        required = ", ".join(table.required[:-1]) + f" and {table.required[-1]}"
+        raise ValueError(f"{where}: the header has no {missing[0]!r} column; {required} are required")
     return names
 
 
