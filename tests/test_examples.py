@@ -81,7 +81,20 @@ def check_random_agent(out: str) -> None:
     assert final == pytest.approx(info["e_tr"], abs=5e-4) and total == pytest.approx(replayed, abs=0.05)
 
 
+def check_identify_and_tune(out: str) -> None:
+    """The summary it prints is the one docs/identification.md shows (the guide's numbers come from this run)."""
+    summary = out[out.index("identified: lags") : out.index("every file is in")].strip().splitlines()
+    guide = (ROOT / "docs" / "identification.md").read_text()
+    for line in summary:
+        assert line in guide, f"docs/identification.md does not show this line of the worked example:\n{line}"
+    (delay,) = number(rf"command delay {NUMBER} s", out)
+    assert delay == pytest.approx(0.05)  # the real robot's hidden latency, found
+    better, low, _ = number(rf"tuned over default: {NUMBER} \[{NUMBER}, {NUMBER}\] % lower", out)
+    assert low > 0 and better > 0
+
+
 CHECKS = {
+    "identify_and_tune.py": check_identify_and_tune,
     "custom_controller.py": check_custom_controller,
     "custom_trajectory.py": check_custom_trajectory,
     "monte_carlo.py": check_monte_carlo,
