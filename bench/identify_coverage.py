@@ -21,7 +21,7 @@ import numpy as np
 
 from ddtrack import enable_float64
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
-from ddtrack.sysid import NAMES, excitation_plan, identify_lag, lag_log
+from ddtrack.sysid import LAG, excitation_plan, identify_lag, lag_log
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 #: name -> (lag_log keywords, the delay [s] and reading to find)
@@ -52,7 +52,7 @@ def main() -> None:
             start = time.perf_counter()
             fit = identify_lag(log)
             seconds += time.perf_counter() - start
-            z.append((fit.theta - THETA) / fit.std)
+            z.append((fit.params - THETA) / fit.std)
             relative.append(fit.std / np.abs(THETA))
             delays += abs(fit.delay - delay) < 1e-9
             readings += fit.interval_mean is interval_mean
@@ -62,9 +62,9 @@ def main() -> None:
         results[name] = {
             "seeds": args.seeds,
             "coverage_95": float(covered.mean()),
-            "coverage_95_per_parameter": dict(zip(NAMES, covered.mean(axis=0).tolist(), strict=True)),
-            "z_std_per_parameter": dict(zip(NAMES, z_all.std(axis=0).tolist(), strict=True)),
-            "median_relative_std": dict(zip(NAMES, np.median(relative, axis=0).tolist(), strict=True)),
+            "coverage_95_per_parameter": dict(zip(LAG.names, covered.mean(axis=0).tolist(), strict=True)),
+            "z_std_per_parameter": dict(zip(LAG.names, z_all.std(axis=0).tolist(), strict=True)),
+            "median_relative_std": dict(zip(LAG.names, np.median(relative, axis=0).tolist(), strict=True)),
             "delay_found": delays / args.seeds,
             "reading_found": readings / args.seeds,
             "worst_held_out_fit_percent": float(min(fits)),
@@ -76,7 +76,7 @@ def main() -> None:
     for name, r in results.items():
         print(f"{name}: {r['seeds']} seeds")
         print(f"  95 % intervals covering the truth: {100 * r['coverage_95']:.1f} % (over seeds and parameters)")
-        for p in NAMES:
+        for p in LAG.names:
             print(
                 f"    {p}: coverage {100 * r['coverage_95_per_parameter'][p]:5.1f} %, std of z "
                 f"{r['z_std_per_parameter'][p]:.2f}, median relative std {100 * r['median_relative_std'][p]:.3g} %"

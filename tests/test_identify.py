@@ -11,7 +11,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from ddtrack.errors import ConfigError
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
 from ddtrack.ros.messages import header, message, planar_pose, twist, typestore
-from ddtrack.sysid import SpeedLog, excitation_plan, identify_lag, lag_log
+from ddtrack.sysid import SpeedLog, body_log, excitation_plan, identify_body, identify_lag, lag_log, torque_plan
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 PLAN = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=60.0, rate=20.0, seed=0)
@@ -20,7 +20,7 @@ SEEDS = range(20)
 
 def z_scores(**conditions) -> tuple[np.ndarray, list]:
     fits = [identify_lag(lag_log(THETA, PLAN, seed=seed, **conditions), max_delay=0.15) for seed in SEEDS]
-    return np.array([(fit.theta - THETA) / fit.std for fit in fits]), fits
+    return np.array([(fit.params - THETA) / fit.std for fit in fits]), fits
 
 
 @pytest.mark.parametrize(
@@ -147,3 +147,53 @@ def test_excite_writes_a_csv_and_a_bag_of_timed_commands(tmp_path, cli):
     assert len(stamps) == 400 and stamps[1] - stamps[0] == 50_000_000
     code, _, err = cli("excite", "--preset", "turtlebot3_burgr", "--out", tmp_path / "x.csv")
     assert code == 2 and "did you mean 'turtlebot3_burger'?" in err and not (tmp_path / "x.csv").exists()
+
+
+# --- the body model of a torque-driven robot ------------------------------------------------------------------
+
+RADIUS, HALF = 0.05, 0.25
+#: the paper's true plant with geared wheels: M_v = m + 2 J_w / R^2, m d, M_w = I_C + m d^2 + 2 J_w L^2 / R^2,
+#: b_w, tau_c
+M, D, I_C, J_W = 12.0, 0.08, 0.7, 0.002
+BODY = np.array([M + 2 * J_W / RADIUS**2, M * D, I_C + M * D**2 + 2 * J_W * HALF**2 / RADIUS**2, 0.005, 0.05])
+
+
+def test_the_body_model_is_recovered_within_its_reported_uncertainty():
+    t, torque = torque_plan(max_torque=1.5, duration=16.0, rate=50.0, seed=0)
+    z = []
+    for seed in SEEDS:
+        log = body_log(
+            BODY, t, torque, wheel_radius=RADIUS, half_axle=HALF, noise=(0.002, 0.005), delay=0.02, seed=seed
+        )
+        fit = identify_body(log, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.02)
+        assert fit.delay == pytest.approx(0.02) and not fit.interval_mean
+        z.append((fit.params - BODY) / fit.std)
+    covered = np.abs(np.array(z)) <= 1.96
+    assert covered.mean() >= 0.85 and np.all(np.abs(np.array(z)) < 5), np.round(np.array(z), 2)  # 100 intervals
+
+
+def test_ddtrack_identifies_its_own_torque_plant_from_a_bag_of_a_closed_loop_run(tmp_path, cli):
+    """Backstepping drives the paper's true plant on a figure eight; the run, exported as a bag (/joint_states
+    efforts, /odom), gives back the plant's mass, centre of mass, inertia and friction."""
+    scenario = tmp_path / "truth.toml"
+    scenario.write_text(
+        'name = "truth"\n[simulation]\nduration = 12.0\nmetric_window = [0.0, 12.0]\n[robot]\npreset = "paper"\n'
+        f"[plant]\nmass = {M}\ninertia = {I_C}\ncom_offset = {D}\nviscous_friction = 0.005\ncoulomb_friction = 0.05\n"
+        '[trajectory]\nkind = "figure_eight"\nsize = 2.0\nperiod = 20.0\n[initial]\npose = [0.0, 0.0, 0.0]\n'
+        '[controller]\nkind = "backstepping"\n'
+    )
+    assert cli("run", scenario, "--out", tmp_path / "run")[0] == 0
+    assert cli("export", tmp_path / "run", "--to", tmp_path / "run.mcap")[0] == 0
+    out = tmp_path / "body.toml"
+    code, printed, _ = cli(
+        "identify", tmp_path / "run.mcap", "--model", "body", "--preset", "paper", "--max-delay", "0", "--out", out
+    )
+    assert code == 0 and "spin inertia is folded into mass and inertia" in printed
+    import tomllib
+
+    plant = tomllib.loads(out.read_text())["plant"]
+    truth = {"mass": M, "com_offset": D, "inertia": I_C, "viscous_friction": 0.005, "coulomb_friction": 0.05}
+    for key, value in truth.items():
+        assert plant[key] == pytest.approx(value, rel=1e-3), key
+    code, _, err = cli("identify", tmp_path / "run.mcap", "--model", "body")
+    assert code == 2 and "--preset, or --wheel-radius and --half-axle" in err

@@ -3,7 +3,6 @@ log), docs/identification.md."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import click
@@ -104,45 +103,81 @@ def _top_speeds(preset: str | None, max_speed: float | None, max_yaw_rate: float
     return max_speed, max_yaw_rate
 
 
-@cli.command(short_help="Identify a velocity-commanded robot's lag model from a log.")
+@cli.command(short_help="Identify a robot's velocity lags, or its body model, from a log.")
 @click.argument("log", metavar="LOG", type=click.Path(path_type=Path))
 @click.option(
-    "--cmd-topic", default="/cmd_vel", show_default=True, help="The commands, in a bag (Twist or TwistStamped)."
+    "--model",
+    type=click.Choice(["lag", "body"]),
+    default="lag",
+    show_default=True,
+    help="lag: a base taking cmd_vel (theta_1..theta_6); body: a robot driven by wheel torques (mass, inertia, "
+    "centre of mass, friction).",
 )
-@click.option("--odom-topic", default="/odom", show_default=True, help="The measured speeds, in a bag (Odometry).")
+@click.option("--cmd-topic", default="/cmd_vel", show_default=True, help="lag: the commands (Twist or TwistStamped).")
+@click.option("--joint-topic", default="/joint_states", show_default=True, help="body: the wheel efforts.")
+@click.option("--odom-topic", default="/odom", show_default=True, help="The measured speeds (Odometry's twist).")
+@click.option("--preset", metavar="NAME", help="body: take the wheel radius and half axle of this robot.")
+@click.option("--wheel-radius", type=click.FloatRange(min=0.0, min_open=True), metavar="R", help="body: [m].")
+@click.option("--half-axle", type=click.FloatRange(min=0.0, min_open=True), metavar="L", help="body: [m].")
 @click.option(
-    "--max-delay", type=click.FloatRange(0.0, 2.0), default=0.3, show_default=True, help="Command delays tried [s]."
+    "--max-delay", type=click.FloatRange(0.0, 2.0), default=0.3, show_default=True, help="Input delays tried [s]."
 )
 @click.option("--out", type=click.Path(path_type=Path), metavar="FILE.toml", help="Write the [plant] fragment here.")
 @overwrite_option
-def identify(log: Path, cmd_topic: str, odom_topic: str, max_delay: float, out: Path | None, overwrite: bool) -> int:
-    """Fit the velocity-lag model (theta_1..theta_6) and the command delay to LOG: a bag (a folder, .mcap or .db3:
-    /cmd_vel and /odom), a CSV or Parquet table (t, v_cmd, omega_cmd, v, omega), or a run folder. Prints each
-    parameter with its 95 % interval, the fit on the held-out last quarter, and what the log could not separate."""
+def identify(
+    log: Path,
+    model: str,
+    cmd_topic: str,
+    joint_topic: str,
+    odom_topic: str,
+    preset: str | None,
+    wheel_radius: float | None,
+    half_axle: float | None,
+    max_delay: float,
+    out: Path | None,
+    overwrite: bool,
+) -> int:
+    """Fit a model and the input delay to LOG: a bag (a folder, .mcap or .db3: /cmd_vel or /joint_states, and
+    /odom), a CSV or Parquet table (t, v, omega and v_cmd, omega_cmd or tau_r, tau_l), or a run folder. Prints each
+    parameter with its 95 % interval, the fit on the held-out last quarter, and what the log could not separate,
+    as a [plant] fragment."""
     from ..outdir import atomic_write
     from ..ros import check_target
-    from ..sysid import NAMES, UNITS, identify_lag, read_speed_log
+    from ..sysid import LAG, body_model, identify_body, identify_lag, lag_time_constants, plant_keys, read_speed_log
 
     if out is not None:
         if out.suffix.lower() != ".toml":
             raise ConfigError("--out", f"'{out}' is not a .toml file", "give FILE.toml")
         check_target(out, overwrite=overwrite)
-    speed_log = read_speed_log(log, cmd_topic=cmd_topic, odom_topic=odom_topic)
-    fit = identify_lag(speed_log, max_delay=max_delay)
-    lines = [f"# ddtrack identify {log}: the velocity-lag model (docs/identification.md), 95 % intervals"]
-    for name, unit, value, sigma in zip(NAMES, UNITS, fit.theta, fit.std, strict=True):
+    if model == "body":
+        radius, half = _geometry(preset, wheel_radius, half_axle)
+    speed_log = read_speed_log(log, model=model, cmd_topic=cmd_topic, odom_topic=odom_topic, joint_topic=joint_topic)
+    if model == "body":
+        fit = identify_body(speed_log, wheel_radius=radius, half_axle=half, max_delay=max_delay)
+        described = body_model(wheel_radius=radius, half_axle=half)
+    else:
+        fit, described = identify_lag(speed_log, max_delay=max_delay), LAG
+    lines = [f"# ddtrack identify {log}: the {model} model (docs/identification.md), 95 % intervals"]
+    for name, unit, value, sigma in zip(described.names, described.units, fit.params, fit.std, strict=True):
         lines.append(f"#   {name} = {value:.6g} +- {1.96 * sigma:.2g} [{unit}]")
-    lag_v, lag_w = fit.time_constants
+    reading = "means over each sample interval (odometry)" if fit.interval_mean else "instantaneous"
+    if model == "lag":
+        lag_v, lag_w = lag_time_constants(fit.params)
+        lines.append(f"#   lags {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); command delay {fit.delay:.3g} s")
+    else:
+        lines.append(f"#   torque delay {fit.delay:.3g} s; the wheels' spin inertia is folded into mass and inertia")
     lines += [
-        f"#   lags {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); command delay {fit.delay:.3g} s; speeds read as "
-        + ("means over each sample interval (odometry)" if fit.interval_mean else "instantaneous"),
+        f"#   speeds read as {reading}",
         f"#   fit on the held-out last quarter ({fit.samples[1]} samples): v {fit.fit_percent['v']:.1f} %, "
         f"omega {fit.fit_percent['omega']:.1f} %; residual spread {fit.noise[0]:.2g} m/s, {fit.noise[1]:.2g} rad/s",
         *(f"#   note: {note}" for note in fit.notes),
         "[plant]",
-        'model = "lag"',
-        "lag = [" + ", ".join(repr(float(value)) for value in fit.theta) + "]",
     ]
+    if model == "lag":
+        lines += ['model = "lag"', "lag = [" + ", ".join(repr(float(value)) for value in fit.params) + "]"]
+    else:
+        lines += [f"{key} = {value!r}" for key, value in plant_keys(fit).items()]
+        lines += [f"wheel_radius = {radius!r}", f"half_axle = {half!r}"]
     if fit.delay > 0:
         lines += ["[sensing]", f"actuation_delay = {fit.delay!r}"]
     text = "\n".join(lines) + "\n"
@@ -150,6 +185,25 @@ def identify(log: Path, cmd_topic: str, odom_topic: str, max_delay: float, out: 
     if out is not None:
         atomic_write(out, lambda file: file.write(text.encode()))
         click.echo(f"wrote {out}")
-    if not math.isfinite(fit.fit_percent["v"]) or min(fit.fit_percent.values()) < 50:
+    if min(fit.fit_percent.values()) < 50:
         click.echo("warning: the model predicts the held-out speeds poorly (fit below 50 %)", err=True)
     return 0
+
+
+def _geometry(preset: str | None, wheel_radius: float | None, half_axle: float | None) -> tuple[float, float]:
+    """The wheel radius and half axle from the options, or from the preset where they are left out."""
+    if preset is not None:
+        from ..robots import preset as robot_preset
+
+        try:
+            robot = robot_preset(preset)
+        except ConfigError as exc:
+            raise ConfigError("--preset", exc.message, exc.suggestion) from None
+        wheel_radius = wheel_radius if wheel_radius is not None else robot.params["wheel_radius"]
+        half_axle = half_axle if half_axle is not None else robot.params["half_axle"]
+    if wheel_radius is None or half_axle is None:
+        missing = "--wheel-radius" if wheel_radius is None else "--half-axle"
+        raise ConfigError(
+            missing, "the body model needs the robot's geometry", "give --preset, or --wheel-radius and --half-axle"
+        )
+    return float(wheel_radius), float(half_axle)

@@ -1,6 +1,7 @@
-"""Logs to identify from: a ROS 2 bag (``/cmd_vel`` and ``/odom``), or a table (CSV or Parquet) with the columns
-``t, v_cmd, omega_cmd, v, omega`` (a ``ddtrack run`` folder's ``timeseries.parquet``, or ``ddtrack export``'s CSV,
-whose ``name [unit]`` headers are read by name)."""
+"""Logs to identify from: a ROS 2 bag (the inputs on ``/cmd_vel``, or the wheel efforts of ``/joint_states``, and
+the speeds of ``/odom``), or a table (CSV or Parquet) with the columns ``t, v, omega`` and the inputs
+``v_cmd, omega_cmd`` or ``tau_r, tau_l`` (a ``ddtrack run`` folder's ``timeseries.parquet``, or ``ddtrack
+export``'s CSV, whose ``name [unit]`` headers are read by name)."""
 
 from __future__ import annotations
 
@@ -11,21 +12,32 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
-from .lag import SpeedLog
+from .fit import SpeedLog
 
-COLUMNS = ("t", "v_cmd", "omega_cmd", "v", "omega")
+#: the input columns of a table, per model: velocity commands for the lag model, wheel torques for the body model
+INPUT_COLUMNS = {"lag": ("v_cmd", "omega_cmd"), "body": ("tau_r", "tau_l")}
 TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 
-def read_speed_log(path: Path, *, cmd_topic: str = "/cmd_vel", odom_topic: str = "/odom") -> SpeedLog:
-    """The commands and measured speeds of ``path``: a bag (a folder, ``.mcap`` or ``.db3``), ``.csv`` or
-    ``.parquet``; a run folder reads its ``timeseries.parquet``."""
+def read_speed_log(
+    path: Path,
+    *,
+    model: str = "lag",
+    cmd_topic: str = "/cmd_vel",
+    odom_topic: str = "/odom",
+    joint_topic: str = "/joint_states",
+) -> SpeedLog:
+    """The inputs (the lag model's velocity commands, or the body model's wheel torques) and measured speeds of
+    ``path``: a bag (a folder, ``.mcap`` or ``.db3``), ``.csv`` or ``.parquet``; a run folder reads its
+    ``timeseries.parquet``."""
     if path.is_dir() and (path / "timeseries.parquet").is_file():
         path = path / "timeseries.parquet"
     suffix = path.suffix.lower()
     if suffix in (".csv", ".parquet"):
-        return _table_log(path)
+        return _table_log(path, INPUT_COLUMNS[model])
     if path.is_dir() or suffix in (".mcap", ".db3"):
+        if model == "body":
+            return torque_bag_log(path, joint_topic=joint_topic, odom_topic=odom_topic)
         return bag_log(path, cmd_topic=cmd_topic, odom_topic=odom_topic)
     raise ConfigError("LOG", f"'{path}' is neither a bag nor a .csv or .parquet table", "give one of those")
 
@@ -34,7 +46,7 @@ def bag_log(path: Path, *, cmd_topic: str, odom_topic: str) -> SpeedLog:
     """Measured speeds at each odometry stamp, with the velocity command last received at or before it (a base
     holds cmd_vel until the next one). Samples before the first command are dropped."""
     from ..ros.messages import stamp_nanoseconds
-    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
+    from ..ros.reading import open_bag, topic_messages
 
     with open_bag(path) as reader:
         commands = topic_messages(reader, cmd_topic, TWIST_TYPES, option="--cmd-topic")
@@ -49,18 +61,44 @@ def bag_log(path: Path, *, cmd_topic: str, odom_topic: str) -> SpeedLog:
     values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
     order = np.argsort(sent, kind="stable")  # receive order can differ from stamp order
     sent, values = sent[order], values[order]
+    return _held_inputs(path, sent, values, odometry, f"'{path}' ({cmd_topic}, {odom_topic})")
+
+
+def torque_bag_log(path: Path, *, joint_topic: str, odom_topic: str) -> SpeedLog:
+    """Measured speeds at each odometry stamp, with the wheel efforts of ``joint_topic`` last published at or
+    before it; the right wheel is the joint whose name says "right" (else the first)."""
+    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
+
+    with open_bag(path) as reader:
+        joints = topic_messages(reader, joint_topic, ("sensor_msgs/msg/JointState",), option="--joint-topic")
+        odometry = topic_messages(reader, odom_topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
+    names = list(joints[0][1].name)
+    if len(joints[0][1].effort) < 2:
+        raise ConfigError("--joint-topic", f"'{joint_topic}' carries no wheel efforts", "record the wheel torques")
+    right = next((i for i, name in enumerate(names) if "right" in name), 0)
+    left = next((i for i, name in enumerate(names) if "left" in name), 1 - right)
+    sent = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in joints], dtype=np.int64)
+    values = np.array([[msg.effort[right], msg.effort[left]] for _, msg in joints], dtype=float)
+    order = np.argsort(sent, kind="stable")
+    return _held_inputs(path, sent[order], values[order], odometry, f"'{path}' ({joint_topic}, {odom_topic})")
+
+
+def _held_inputs(path: Path, sent: np.ndarray, values: np.ndarray, odometry: list, source: str) -> SpeedLog:
+    """At each odometry stamp, its twist's (v, omega) and the input last sent at or before it (held until the
+    next); samples before the first input are dropped."""
+    from ..ros.reading import header_or_bag_time
+
     measured_at = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in odometry], dtype=np.int64)
     speeds = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for _, m in odometry], dtype=float)
     latest = np.searchsorted(sent, measured_at, side="right") - 1
     valid = latest >= 0
     if valid.sum() == 0:
-        raise ConfigError("LOG", f"'{path}': every odometry message comes before the first command", "")
+        raise ConfigError("LOG", f"'{path}': every odometry message comes before the first input", "")
     t = (measured_at[valid] - measured_at[valid][0]) / 1e9
-    source = f"'{path}' ({cmd_topic}, {odom_topic})"
     return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source)
 
 
-def _table_log(path: Path) -> SpeedLog:
+def _table_log(path: Path, inputs: tuple[str, str]) -> SpeedLog:
     if not path.is_file():
         raise ConfigError("LOG", f"'{path}' does not exist", "give a bag, a .csv or a .parquet file")
     if path.suffix.lower() == ".parquet":
@@ -73,17 +111,17 @@ def _table_log(path: Path) -> SpeedLog:
         columns = {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
     else:
         columns = _csv_columns(path)
-    missing = [name for name in COLUMNS if name not in columns]
+    missing = [name for name in ("t", *inputs, "v", "omega") if name not in columns]
     if missing:
         raise ConfigError(
             "LOG",
             f"'{path}' lacks the columns {', '.join(missing)}",
-            "a log needs t [s], v_cmd [m/s], omega_cmd [rad/s] (the commands) and v, omega (the measured speeds)",
+            f"a log needs t [s], {', '.join(inputs)} (the inputs) and v, omega (the measured speeds)",
         )
     column = lambda name: np.asarray(columns[name], dtype=float)  # noqa: E731
     return SpeedLog(
         t=column("t"),
-        command=np.column_stack([column("v_cmd"), column("omega_cmd")]),
+        command=np.column_stack([column(inputs[0]), column(inputs[1])]),
         speed=np.column_stack([column("v"), column("omega")]),
         source=f"'{path}'",
     )

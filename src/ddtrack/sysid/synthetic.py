@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .excitation import Plan
-from .lag import SpeedLog, simulate_speeds
+from .fit import SpeedLog, simulate
+from .lag import simulate_speeds
 
 FINE = 10  #: simulation points per sample interval
 
@@ -53,3 +54,49 @@ def lag_log(
     t = plan.t + step  # a rate is known at the end of its interval, when the next command has just been sent
     in_force = sent[np.minimum(np.arange(len(plan.t)) + 1, len(plan.t) - 1)]
     return SpeedLog(t=t, command=in_force, speed=measured, source="synthetic lag log with encoders")
+
+
+def torque_plan(
+    *, max_torque: float, duration: float = 30.0, rate: float = 50.0, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Times [s] and wheel torques (n, 2) [N m] that excite a torque-driven robot without running away: held
+    steps of common and differential torque, each followed by its opposite, so the speeds wander about zero."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(round(duration * rate)) / rate
+    torque = np.zeros((t.size, 2))
+    begin = 0.5
+    while begin < duration - 0.5:
+        hold = rng.uniform(0.3, 1.0)
+        push = max_torque * np.array([rng.uniform(-1, 1), rng.uniform(-1, 1)])
+        for sign, start in ((1.0, begin), (-1.0, begin + hold)):
+            span = (t >= start) & (t < start + hold)
+            torque[span] = sign * np.array([push[0] + push[1], push[0] - push[1]]) / 2
+        begin += 2 * hold
+    return t, torque
+
+
+def body_log(
+    truth: np.ndarray,
+    t: np.ndarray,
+    torque: np.ndarray,
+    *,
+    wheel_radius: float,
+    half_axle: float,
+    noise: tuple[float, float] = (0.0, 0.0),
+    delay: float = 0.0,
+    seed: int = 0,
+) -> SpeedLog:
+    """The log of a torque-driven robot whose body model is ``truth`` = (M_v, m d, M_w, b_w, tau_c): the torques as
+    commanded, the speeds plus white ``noise`` (std of v [m/s], omega [rad/s]); ``delay`` [s] from command to
+    wheel."""
+    from .body import body_model
+
+    model = body_model(wheel_radius=wheel_radius, half_axle=half_axle)
+    step = float(np.median(np.diff(t)))
+    fine_t = np.arange(len(t) * FINE + 1) * (step / FINE)
+    acting = np.searchsorted(t, fine_t - delay + 1e-12, side="right") - 1
+    applied = np.where((acting >= 0)[:, None], torque[np.clip(acting, 0, None)], 0.0)
+    speeds = simulate(model, np.asarray(truth, dtype=float), fine_t, applied, np.zeros(2), False)
+    rng = np.random.default_rng(seed)
+    measured = speeds[::FINE][: len(t)] + rng.normal(size=(len(t), 2)) * np.asarray(noise)
+    return SpeedLog(t=t, command=torque, speed=measured, source="synthetic body log")
