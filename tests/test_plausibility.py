@@ -83,3 +83,18 @@ def test_the_motor_driven_plant_stays_inside_its_curve(tmp_path, cli):
     assert metrics["torque_beyond_envelope_max"] <= 1e-6 * STALL and metrics["time_outside_torque_envelope"] == 0
     assert metrics["time_beyond_no_load_speed"] == 0
     assert not codes & {"wheel_speed_beyond_motor", "torque_beyond_motor"}
+
+
+def test_a_slipping_wheel_is_checked_at_its_own_spin_not_the_bodys_rolling_speed():
+    """A slip plant records each wheel's spin (phidot_r, phidot_l); while it slips, the body's (v +- L omega) / R is
+    another speed, at which the motor's curve would misjudge the torque (false torque_beyond_motor flags)."""
+    from ddtrack.model import RobotParams
+    from ddtrack.plausibility import traction_columns
+
+    params = RobotParams(**preset("turtlebot3_burger").params)
+    t = np.arange(5) * 0.05
+    body = {"t": t, "v": np.full(5, 0.1), "omega": np.zeros(5), "tau_r": np.full(5, 0.2), "tau_l": np.full(5, 0.2)}
+    rolling = traction_columns(params, body)
+    np.testing.assert_allclose(rolling["wheel_speed_r"], 0.1 / params.wheel_radius)
+    spinning = traction_columns(params, body | {"phidot_r": np.full(5, 5.0), "phidot_l": np.full(5, 4.0)})
+    assert np.all(spinning["wheel_speed_r"] == 5.0) and np.all(spinning["wheel_speed_l"] == 4.0)

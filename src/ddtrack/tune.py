@@ -141,7 +141,7 @@ def tune(
     if effort_weight > 0 and any(controller_output(p.scenario.controller) != "torque" for p in training):
         raise ConfigError(
             "--effort-weight",
-            "the effort term integrates wheel torques, and a controller over cmd_vel (inner = \"none\") commands none",
+            'the effort term integrates wheel torques, and a controller over cmd_vel (inner = "none") commands none',
             "drop --effort-weight, or tune over an inner loop",
         )
     gamma_array = jnp.asarray(gamma, float)
