@@ -3,8 +3,8 @@
 The question users ask: how will a controller do on *my* robot? Each preset drives the plant it really has (the
 paper's torque-source robot; a TurtleBot3's Dynamixel servos on a floor of finite grip, in current mode for torque
 laws and under their wheel-speed PI loop for velocity laws, as cmd_vel; a Pioneer 3-DX's identified velocity lags),
-at the rate it is driven (100 Hz for the paper's robot, 20 Hz for the ROS robots), on a figure eight (and, from
-Python, a filleted square) scaled to its top speed. Conditions vary one factor at a time from the nominal robot
+at the rate it is driven (100 Hz for the paper's robot, 20 Hz for the ROS robots), on a figure eight and a filleted
+square scaled to its top speed. Conditions vary one factor at a time from the nominal robot
 (no latency, floor friction 1.0, true pose, no payload); a condition the robot's model cannot express (a payload on
 the Pioneer's identified lags, a floor under the paper's massless wheels) is left out and listed as such. Seed s
 draws the same plant (mass and inertia within 10 %), disturbance and noise for every controller: cells pair by seed.

@@ -309,7 +309,8 @@ def sweep(
     default="quick",
     show_default=True,
     help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds; robots: "
-    "4 robot presets x a figure eight x 6 conditions x 3 seeds, each robot on the plant it really has.",
+    "4 robot presets x 2 paths (a figure eight, a filleted square) x 6 conditions x 3 seeds, each robot on the "
+    "plant it really has.",
 )
 @click.option(
     "--controllers",
