@@ -4,11 +4,15 @@ log), docs/identification.md."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from ..errors import ConfigError
 from . import cli, overwrite_option
+
+if TYPE_CHECKING:
+    from ..robots import RobotPreset
 
 
 @cli.command(short_help="Write a plan of timed cmd_vel commands that makes a robot's log identify it.")
@@ -84,15 +88,20 @@ def excite(
     return 0
 
 
+def _preset_option(name: str) -> RobotPreset:
+    """The robot preset ``--preset`` names (a misspelt one: exit 2 naming the option, with a did-you-mean)."""
+    from ..robots import preset
+
+    try:
+        return preset(name)
+    except ConfigError as exc:
+        raise ConfigError("--preset", exc.message, exc.suggestion) from None
+
+
 def _top_speeds(preset: str | None, max_speed: float | None, max_yaw_rate: float | None) -> tuple[float, float]:
     """The top speed and yaw rate from the options, or from the preset where they are left out."""
     if preset is not None:
-        from ..robots import preset as robot_preset
-
-        try:
-            robot = robot_preset(preset)
-        except ConfigError as exc:
-            raise ConfigError("--preset", exc.message, exc.suggestion) from None
+        robot = _preset_option(preset)
         max_speed = max_speed if max_speed is not None else robot.max_speed
         max_yaw_rate = max_yaw_rate if max_yaw_rate is not None else robot.max_yaw_rate
     if max_speed is None or max_yaw_rate is None:
@@ -193,12 +202,7 @@ def identify(
 def _geometry(preset: str | None, wheel_radius: float | None, half_axle: float | None) -> tuple[float, float]:
     """The wheel radius and half axle from the options, or from the preset where they are left out."""
     if preset is not None:
-        from ..robots import preset as robot_preset
-
-        try:
-            robot = robot_preset(preset)
-        except ConfigError as exc:
-            raise ConfigError("--preset", exc.message, exc.suggestion) from None
+        robot = _preset_option(preset)
         wheel_radius = wheel_radius if wheel_radius is not None else robot.params["wheel_radius"]
         half_axle = half_axle if half_axle is not None else robot.params["half_axle"]
     if wheel_radius is None or half_axle is None:
