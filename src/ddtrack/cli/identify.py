@@ -63,7 +63,7 @@ def excite(
         raise ConfigError(
             "--out", f"'{out}' has the suffix '{out.suffix}'", "give FILE.csv, FILE.mcap or a folder name"
         )
-    check_target(out, overwrite=overwrite)
+    check_target(out, overwrite=overwrite, option="--out")
     plan = excitation_plan(
         max_speed=top_speed, max_yaw_rate=top_yaw_rate, duration=duration, rate=rate, seed=seed, fraction=fraction
     )
@@ -157,7 +157,7 @@ def identify(
     if out is not None:
         if out.suffix.lower() != ".toml":
             raise ConfigError("--out", f"'{out}' is not a .toml file", "give FILE.toml")
-        check_target(out, overwrite=overwrite)
+        check_target(out, overwrite=overwrite, option="--out")
     if model == "body":
         radius, half = _geometry(preset, wheel_radius, half_axle)
     speed_log = read_speed_log(log, model=model, cmd_topic=cmd_topic, odom_topic=odom_topic, joint_topic=joint_topic)

@@ -67,8 +67,6 @@ COLUMN_UNITS = {
     **dict.fromkeys(("saturated", "gate", "rotating", "mu_required", "emulator_loss", "fix_clock"), "1"),
 }
 
-PERIODIC_TOPICS = ("/tf", "/odom", "/reference", "/cmd_vel", "/joint_states")
-
 
 @dataclass(frozen=True)
 class Export:
@@ -107,15 +105,15 @@ def export_run(
     return Export(to, len(columns["t"]), counts)
 
 
-def check_target(to: Path, *, overwrite: bool) -> None:
-    """Refuse (ConfigError, before any work) to replace ``to`` without ``overwrite``, or ever to replace a folder that
-    is not a rosbag2 folder, or a folder by a file."""
+def check_target(to: Path, *, overwrite: bool, option: str = "--to") -> None:
+    """Refuse (ConfigError naming ``option``, before any work) to replace ``to`` without ``overwrite``, or ever to
+    replace a folder that is not a rosbag2 folder, or a folder by a file."""
     if not to.exists():
         return
     if not overwrite:
-        raise ConfigError("--to", f"'{to}' exists", "give a new path, or add --overwrite to replace it")
+        raise ConfigError(option, f"'{to}' exists", "give a new path, or add --overwrite to replace it")
     if to.is_dir() and (to.suffix or not (to / "metadata.yaml").is_file()):
-        raise ConfigError("--to", f"'{to}' is a folder that is not a rosbag2 folder", "give another path")
+        raise ConfigError(option, f"'{to}' is a folder that is not a rosbag2 folder", "give another path")
 
 
 def _origin_nanoseconds(folder: Path, start: float | None) -> int:
