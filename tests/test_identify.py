@@ -145,6 +145,8 @@ def test_excite_writes_a_csv_and_a_bag_of_timed_commands(tmp_path, cli):
     with AnyReader([bag_out], default_typestore=typestore()) as reader:
         stamps = [t for _, t, _ in reader.messages()]
     assert len(stamps) == 400 and stamps[1] - stamps[0] == 50_000_000
+    code, _, err = cli("excite", "--preset", "turtlebot3_burger", "--out", csv_out)
+    assert code == 2 and err.startswith(f"error: --out: '{csv_out}' exists")  # replaced only with --overwrite
     code, _, err = cli("excite", "--preset", "turtlebot3_burgr", "--out", tmp_path / "x.csv")
     assert code == 2 and "did you mean 'turtlebot3_burger'?" in err and not (tmp_path / "x.csv").exists()
 
