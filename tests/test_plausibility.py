@@ -98,3 +98,27 @@ def test_a_slipping_wheel_is_checked_at_its_own_spin_not_the_bodys_rolling_speed
     np.testing.assert_allclose(rolling["wheel_speed_r"], 0.1 / params.wheel_radius)
     spinning = traction_columns(params, body | {"phidot_r": np.full(5, 5.0), "phidot_l": np.full(5, 4.0)})
     assert np.all(spinning["wheel_speed_r"] == 5.0) and np.all(spinning["wheel_speed_l"] == 4.0)
+
+
+def test_a_slip_run_meets_its_motors_curve_alone_and_as_a_batch_row():
+    """The TurtleBot3 Waffle Pi of the robots suite on its filleted square, over cmd_vel on its slip plant: its
+    servos apply torques within their curve at the wheels' spin, and ``ddtrack mc``'s batch path (which keeps only the
+    series the metrics read) checks them at the same speeds as the run alone."""
+    from ddtrack.robot_suite import ENTRY, ROBOTS, base_scenario
+    from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_record, run_setup
+    from ddtrack.scenario.files import validate_scenario
+
+    data = base_scenario(ROBOTS["turtlebot3_waffle_pi"], ENTRY["kinematic_backstepping"], "square")
+    data["simulation"] |= {"duration": 12.0, "metric_window": [0.0, 12.0]}  # the first corner
+    spec = validate_scenario(data)
+    setup, draws = prepare(spec)
+    _, alone = run_record(spec, setup, run_setup(spec, setup, draws))
+    (row,) = batch_metrics(spec, *prepare_batch(spec, [spec.simulation.seed]))
+    keys = (
+        "torque_beyond_envelope_max",
+        "time_outside_torque_envelope",
+        "wheel_speed_max",
+        "time_beyond_no_load_speed",
+    )
+    assert {k: row[k] for k in keys} == {k: alone[k] for k in keys}
+    assert alone["torque_beyond_envelope_max"] < 1e-9 and alone["time_outside_torque_envelope"] == 0.0

@@ -38,7 +38,7 @@ def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray
         "com_offset": float(params.com_offset),
         "half_axle": float(params.half_axle),
     }
-    if "phidot_r" in columns:  # a slip plant's wheels spin at their own speed, not the body's rolling speed
+    if "phidot_r" in columns:  # a slip plant's wheels spin at their own speed, not at the body's rolling speed
         right, left = np.asarray(columns["phidot_r"]), np.asarray(columns["phidot_l"])
     else:
         right, left = traction.wheel_speeds(

@@ -294,6 +294,8 @@ def _steps(scenario: Scenario) -> dict:
 
 #: the series metrics and warnings read
 METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", *ODOMETRY_ERROR.names)
+#: a slip plant's wheel spin speeds, at which the motor's curve is checked (:func:`traction_columns`)
+WHEEL_SPINS = ("phidot_r", "phidot_l")
 
 
 def run_warnings(
@@ -368,6 +370,7 @@ def _metric_series(
         "omega": result.state[..., 4],
     }  # for the grip the run needed
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
+    series |= {name: value for name, value in result.plant_state.items() if name in WHEEL_SPINS}
     return series, result.status, result.failure_index
 
 
