@@ -27,6 +27,10 @@ from .errors import RunError
 MARKER = "ddtrack.json"  #: written into every output folder: {"command", "study", "version", "written"}
 
 
+#: how the marker records when a folder was written (local time with its UTC offset)
+MARKER_TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -147,7 +151,7 @@ def _marker_bytes(command: str, study: str | None) -> bytes:
         "command": command,
         "study": study,
         "version": version("ddtrack"),
-        "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "written": time.strftime(MARKER_TIME_FORMAT),
     }
     return (json.dumps(marker, indent=2) + "\n").encode()
 

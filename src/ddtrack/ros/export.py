@@ -31,7 +31,8 @@ from typing import IO, Any
 import numpy as np
 
 from ..errors import ConfigError, RunError
-from ..outdir import atomic_write, read_marker
+from ..model.traction import wheel_speeds
+from ..outdir import MARKER_TIME_FORMAT, atomic_write, read_marker
 from .messages import (
     BODY_FRAME,
     NANOSECONDS,
@@ -124,7 +125,7 @@ def _origin_nanoseconds(folder: Path, start: float | None) -> int:
     written = marker.get("written") if isinstance(marker, dict) else None
     if isinstance(written, str):
         try:
-            return round(datetime.datetime.strptime(written, "%Y-%m-%dT%H:%M:%S%z").timestamp() * NANOSECONDS)
+            return round(datetime.datetime.strptime(written, MARKER_TIME_FORMAT).timestamp() * NANOSECONDS)
         except ValueError:
             pass  # an older or edited marker: fall back to the time series' own file time
     return (folder / "timeseries.parquet").stat().st_mtime_ns
@@ -145,14 +146,12 @@ def wheel_signals(columns: Mapping[str, np.ndarray], *, half_axle: float, wheel_
 
     Speeds are the plant's own wheel spins where it has them (a slip plant), else those of rolling without slip,
     (v +- L omega) / R; angles are the recorded ones (encoders on), else the speeds integrated (trapezoid)."""
+    right, left = wheel_speeds(columns["v"], columns["omega"], wheel_radius=wheel_radius, half_axle=half_axle)
+    rolling = {"r": right, "l": left}
     speed = {}
-    for side, sign in (("r", 1.0), ("l", -1.0)):
-        for name in (f"phidot_{side}", f"wheel_speed_{side}"):
-            if name in columns:
-                speed[side] = np.asarray(columns[name], dtype=float)
-                break
-        else:
-            speed[side] = (columns["v"] + sign * half_axle * columns["omega"]) / wheel_radius
+    for side in "rl":
+        own = next((columns[name] for name in (f"phidot_{side}", f"wheel_speed_{side}") if name in columns), None)
+        speed[side] = rolling[side] if own is None else np.asarray(own, dtype=float)
     t = columns["t"]
     signals = {}
     for side in ("r", "l"):

@@ -75,6 +75,7 @@ def topic_messages(reader: Any, topic: str, msgtypes: tuple[str, ...], *, option
 
 
 def header_or_bag_time(bag_time: int, msg: Any) -> int:
-    """A message's header stamp [ns], or its bag receive time where the header was left unstamped (0)."""
-    stamped = stamp_nanoseconds(msg.header)
+    """A message's header stamp [ns], or its bag receive time where it has no header (a Twist) or left it
+    unstamped (0)."""
+    stamped = stamp_nanoseconds(msg.header) if hasattr(msg, "header") else 0
     return stamped if stamped > 0 else bag_time

@@ -21,6 +21,7 @@ from jax import Array
 
 from ..model.dynamics import body_acceleration
 from ..model.params import RobotParams
+from ..model.traction import wheel_speeds
 from .fit import SpeedFit, SpeedLog, SpeedModel, identify
 
 NAMES = ("M_v", "md", "M_w", "viscous_friction", "coulomb_friction")
@@ -58,7 +59,7 @@ def body_model(*, wheel_radius: float, half_axle: float, friction_smoothing: flo
 
     def regressors(speed: np.ndarray, rate: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         v, w = speed[:, 0], speed[:, 1]
-        right, left = (v + half * w) / radius, (v - half * w) / radius
+        right, left = wheel_speeds(v, w, wheel_radius=radius, half_axle=half)
         tanh_r, tanh_l = np.tanh(right / friction_smoothing), np.tanh(left / friction_smoothing)
         zero = np.zeros_like(v)
         rows_v = np.column_stack([rate[:, 0], -(w**2), zero, (right + left) / radius, (tanh_r + tanh_l) / radius])

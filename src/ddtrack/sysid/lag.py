@@ -55,7 +55,8 @@ def identify_lag(log: SpeedLog, *, max_delay: float = 0.3) -> SpeedFit:
 
 def lag_time_constants(theta: np.ndarray) -> tuple[float, float]:
     """Lags of v and omega without the coupling terms [s]: theta_1 / theta_4, theta_2 / theta_6."""
-    return float(theta[0] / theta[3]), float(theta[1] / theta[5])
+    lag_v, lag_w = np.asarray(LagPlant(theta=jnp.asarray(theta, float)).time_constants())
+    return float(lag_v), float(lag_w)
 
 
 def simulate_speeds(

@@ -45,18 +45,12 @@ def read_speed_log(
 def bag_log(path: Path, *, cmd_topic: str, odom_topic: str) -> SpeedLog:
     """Measured speeds at each odometry stamp, with the velocity command last received at or before it (a base
     holds cmd_vel until the next one). Samples before the first command are dropped."""
-    from ..ros.messages import stamp_nanoseconds
-    from ..ros.reading import open_bag, topic_messages
+    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
 
     with open_bag(path) as reader:
         commands = topic_messages(reader, cmd_topic, TWIST_TYPES, option="--cmd-topic")
         odometry = topic_messages(reader, odom_topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
-
-    def command_time(bag_time: int, msg: object) -> int:
-        stamped = stamp_nanoseconds(msg.header) if hasattr(msg, "header") else 0
-        return stamped if stamped > 0 else bag_time
-
-    sent = np.array([command_time(bag_time, msg) for bag_time, msg in commands], dtype=np.int64)
+    sent = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in commands], dtype=np.int64)
     twists = [msg.twist if hasattr(msg, "header") else msg for _, msg in commands]
     values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
     order = np.argsort(sent, kind="stable")  # receive order can differ from stamp order

@@ -9,11 +9,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.traction import wheel_speeds
 from .excitation import Plan
 from .fit import SpeedLog, simulate
 from .lag import simulate_speeds
 
 FINE = 10  #: simulation points per sample interval
+
+
+def _applied_finely(t: np.ndarray, inputs: np.ndarray, delay: float) -> tuple[np.ndarray, np.ndarray]:
+    """A fine time grid (``FINE`` points per sample, one sample past the last) and the input in force at each of its
+    points: the last one sent ``delay`` [s] or more before, zero before the first arrives."""
+    step = float(np.median(np.diff(t)))
+    fine_t = np.arange(len(t) * FINE + 1) * (step / FINE)
+    acting = np.searchsorted(t, fine_t - delay + 1e-12, side="right") - 1
+    return fine_t, np.where((acting >= 0)[:, None], inputs[np.clip(acting, 0, None)], 0.0)
 
 
 def lag_log(
@@ -31,17 +41,16 @@ def lag_log(
     (``noise`` = std of v [m/s] and omega [rad/s]; ``encoder_counts`` per wheel revolution, with the wheel radius
     [m] and half axle [m]); ``delay`` [s] between a command and its effect."""
     step = float(np.median(np.diff(plan.t)))
-    fine_t = np.arange(len(plan.t) * FINE + 1) * (step / FINE)
     sent = np.column_stack([plan.v, plan.omega])
-    acting = np.searchsorted(plan.t, fine_t - delay + 1e-12, side="right") - 1  # the last command sent by then
-    command = np.where((acting >= 0)[:, None], sent[np.clip(acting, 0, None)], 0.0)
+    fine_t, command = _applied_finely(plan.t, sent, delay)
     truth = simulate_speeds(np.asarray(theta, dtype=float), fine_t, command, np.zeros(2))
     rng = np.random.default_rng(seed)
     if encoder_counts is None:
         measured = truth[::FINE][: len(plan.t)] + rng.normal(size=(len(plan.t), 2)) * np.asarray(noise)
         return SpeedLog(t=plan.t, command=sent, speed=measured, source="synthetic lag log")
-    wheel_rates = np.column_stack([truth[:, 0] + half_axle * truth[:, 1], truth[:, 0] - half_axle * truth[:, 1]])
-    wheel_rates = wheel_rates / wheel_radius
+    wheel_rates = np.column_stack(
+        wheel_speeds(truth[:, 0], truth[:, 1], wheel_radius=wheel_radius, half_axle=half_axle)
+    )
     angles = np.concatenate(
         [np.zeros((1, 2)), np.cumsum(0.5 * (wheel_rates[1:] + wheel_rates[:-1]) * (step / FINE), axis=0)]
     )
@@ -92,10 +101,7 @@ def body_log(
     from .body import body_model
 
     model = body_model(wheel_radius=wheel_radius, half_axle=half_axle)
-    step = float(np.median(np.diff(t)))
-    fine_t = np.arange(len(t) * FINE + 1) * (step / FINE)
-    acting = np.searchsorted(t, fine_t - delay + 1e-12, side="right") - 1
-    applied = np.where((acting >= 0)[:, None], torque[np.clip(acting, 0, None)], 0.0)
+    fine_t, applied = _applied_finely(t, torque, delay)
     speeds = simulate(model, np.asarray(truth, dtype=float), fine_t, applied, np.zeros(2), False)
     rng = np.random.default_rng(seed)
     measured = speeds[::FINE][: len(t)] + rng.normal(size=(len(t), 2)) * np.asarray(noise)
