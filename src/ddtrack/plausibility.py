@@ -76,12 +76,11 @@ def motor_metrics(motor: DCMotor, columns: dict, control_period: float) -> dict[
 
 
 def preset_motor(scenario: Any) -> DCMotor | None:
-    """The motor of the scenario's ``[robot] preset`` as a :class:`DCMotor`, or None (no preset, or one without
-    a datasheet motor: the paper's robot)."""
-    from .model.motor_plants import motor_from_datasheet
+    """The scenario's motor as a :class:`DCMotor` (its ``[robot] preset``'s datasheet with ``[plant.motor]`` over
+    it), or None (the paper's robot has no datasheet motor)."""
+    from .scenario.motor_configs import motor_or_none
 
-    robot = scenario.robot.preset_robot()
-    return None if robot is None or robot.motor is None else motor_from_datasheet(robot.motor)
+    return motor_or_none(scenario)
 
 
 def traction_warnings(scenario: Any, metrics: dict) -> list[dict]:

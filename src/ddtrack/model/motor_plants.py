@@ -35,14 +35,29 @@ from .motors import DCMotor, VelocityDriver, torque_driver
 from .params import RobotParams
 from .plants import DynamicPlant, ODEPlant
 
-#: what a motor-driven plant logs each period: the applied wheel torques (named as DynamicPlant's) and the currents
-MOTOR_LOGS = Layout(("tau_r", "tau_l", "i_r", "i_l"), ("N m", "N m", "A", "A"))
+#: what a motor-driven plant logs each period: the applied wheel torques (named as DynamicPlant's), the currents and
+#: the armature voltages
+MOTOR_LOGS = Layout(("tau_r", "tau_l", "i_r", "i_l", "u_r", "u_l"), ("N m", "N m", "A", "A", "V", "V"))
 #: the state of :class:`VelocityDrivenPlant`: BODY, then the integral of each wheel's speed error
 VELOCITY_DRIVEN_STATE = Layout((*BODY.names, "pi_r", "pi_l"), (*BODY.units, "rad", "rad"))
 
 
-def _motor_logs(tau: Array, current: Array) -> dict[str, Array]:
-    return {"tau_r": tau[0], "tau_l": tau[1], "i_r": current[0], "i_l": current[1]}
+def armature_voltage(motor: DCMotor, current: Array, wheel_speed: Array) -> Array:
+    """R_a i + k_e phi_dot [V]: the voltage across each armature that drives ``current`` at ``wheel_speed`` (what a
+    PWM board applies once its own current limit has acted), model.md §1.7 with L_a = 0."""
+    return motor.resistance * current + motor.back_emf * wheel_speed
+
+
+def _motor_logs(motor: DCMotor, tau: Array, current: Array, wheel_speed: Array) -> dict[str, Array]:
+    voltage = armature_voltage(motor, current, wheel_speed)
+    return {
+        "tau_r": tau[0],
+        "tau_l": tau[1],
+        "i_r": current[0],
+        "i_l": current[1],
+        "u_r": voltage[0],
+        "u_l": voltage[1],
+    }
 
 
 @pytree_dataclass
@@ -81,8 +96,9 @@ class TorqueDrivenPlant(ODEPlant):
         return jnp.clip(u, -stall, stall)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
-        """``tau_r``, ``tau_l`` [N m] applied and ``i_r``, ``i_l`` [A] drawn at the start of the period."""
-        return _motor_logs(*self.applied(x, u))
+        """``tau_r``, ``tau_l`` [N m] applied, ``i_r``, ``i_l`` [A] drawn and ``u_r``, ``u_l`` [V] across the armatures
+        at the start of the period."""
+        return _motor_logs(self.motor, *self.applied(x, u), wheel_speeds(self.params, x[3:5]))
 
 
 def cruise_integral(params: RobotParams, driver: VelocityDriver, nu: Array) -> Array:
@@ -156,8 +172,9 @@ class VelocityDrivenPlant(ODEPlant):
         return u
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
-        """``tau_r``, ``tau_l`` [N m] applied and ``i_r``, ``i_l`` [A] drawn at the start of the period."""
-        return _motor_logs(*self.applied(x, u))
+        """``tau_r``, ``tau_l`` [N m] applied, ``i_r``, ``i_l`` [A] drawn and ``u_r``, ``u_l`` [V] across the armatures
+        at the start of the period."""
+        return _motor_logs(self.driver.motor, *self.applied(x, u), wheel_speeds(self.params, x[3:5]))
 
 
 T = TypeVar("T")

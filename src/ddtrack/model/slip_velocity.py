@@ -18,16 +18,17 @@ from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4, rosenbrock2
 from ..layout import VELOCITY_COMMAND, Layout, velocity
 from .dynamics import wheel_speeds
-from .motor_plants import cruise_integral
+from .motor_plants import armature_voltage, cruise_integral
 from .motors import VelocityDriver
 from .params import RobotParams
 from .slip import SLIP_LOGS, SLIP_STATE, SlipPlant, broadcast_like, check_drawn, slip_integration
 
 #: the state of :class:`SlipVelocityPlant`: the slip plant's, then the integral of each wheel's speed error
 SLIP_VELOCITY_STATE = Layout((*SLIP_STATE.names, "pi_r", "pi_l"), (*SLIP_STATE.units, "rad", "rad"))
-#: what it logs: the slip plant's channels with the motors' currents after the torques
+#: what it logs: the slip plant's channels with the motors' currents and armature voltages after the torques
 SLIP_VELOCITY_LOGS = Layout(
-    (*SLIP_LOGS.names[:2], "i_r", "i_l", *SLIP_LOGS.names[2:]), (*SLIP_LOGS.units[:2], "A", "A", *SLIP_LOGS.units[2:])
+    (*SLIP_LOGS.names[:2], "i_r", "i_l", "u_r", "u_l", *SLIP_LOGS.names[2:]),
+    (*SLIP_LOGS.units[:2], "A", "A", "V", "V", *SLIP_LOGS.units[2:]),
 )
 #: the slip plant's states
 _SLIP = len(SLIP_STATE)
@@ -108,7 +109,8 @@ class SlipVelocityPlant:
         """Applied torques, currents, slip speeds and the floor's forces at the start of the period."""
         tau, current = self.applied(x, u)
         floor = self.slip.logged(x[:_SLIP], tau)
-        return floor | {"i_r": current[0], "i_l": current[1]}
+        voltage = armature_voltage(self.driver.motor, current, x[6:8])
+        return floor | {"i_r": current[0], "i_l": current[1], "u_r": voltage[0], "u_l": voltage[1]}
 
 
 def slip_velocity_model(

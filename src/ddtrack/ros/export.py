@@ -59,6 +59,7 @@ COLUMN_UNITS = {
     **dict.fromkeys(("wheel_speed_r", "wheel_speed_l", "phidot_r", "phidot_l"), "rad/s"),
     **dict.fromkeys(("tau_r", "tau_l"), "N m"),
     **dict.fromkeys(("i_r", "i_l"), "A"),
+    **dict.fromkeys(("u_r", "u_l"), "V"),
     **dict.fromkeys(("force_rx", "force_lx", "force_y"), "N"),
     "kx": "1/s",
     "ky": "1/m^2",

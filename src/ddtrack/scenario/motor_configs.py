@@ -4,6 +4,7 @@ velocity-lag model (``lag``)."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from ..errors import ConfigError
@@ -20,20 +21,43 @@ from ..model.motor_plants import motor_from_datasheet, torque_driven_model, velo
 
 
 def scenario_motor(scenario: Any) -> DCMotor:
-    """The motor of the scenario's ``[robot] preset``; a ConfigError naming ``plant.model`` if it has none."""
+    """The motor of the scenario (:func:`motor_or_none`); a ConfigError naming ``plant.model`` if it has none."""
     from ..robots import PRESETS
 
-    with_motor = sorted(name for name, robot in PRESETS.items() if robot.motor is not None)
-    name = scenario.robot.preset
-    robot = PRESETS.get(name) if name is not None else None
-    if robot is None or robot.motor is None:
+    motor = motor_or_none(scenario)
+    if motor is None:
+        with_motor = sorted(name for name, robot in PRESETS.items() if robot.motor is not None)
+        name = scenario.robot.preset
         raise ConfigError(
             "plant.model",
             f"'{scenario.plant.model}' needs the robot's motor, and "
             + (f"preset '{name}' has none" if name is not None else "[robot] names no preset"),
-            "set robot.preset to a robot with motors: " + ", ".join(with_motor),
+            "give [plant.motor] (resistance, torque_constant, back_emf, supply_voltage), or set robot.preset to a "
+            "robot with motors: " + ", ".join(with_motor),
         )
-    return motor_from_datasheet(robot.motor)
+    return motor
+
+
+def motor_or_none(scenario: Any) -> DCMotor | None:
+    """The ``[robot] preset``'s datasheet motor with ``[plant.motor]``'s constants over it; None where neither
+    gives one. Without a preset motor, ``[plant.motor]`` must give the four constants no default can stand for."""
+    robot = scenario.robot.preset_robot()
+    preset = None if robot is None or robot.motor is None else motor_from_datasheet(robot.motor)
+    given = {} if scenario.plant.motor is None else scenario.plant.motor.model_dump(exclude_none=True)
+    if preset is not None:
+        return dataclasses.replace(preset, **given)
+    if not given:
+        return None
+    missing = [key for key in ("resistance", "torque_constant", "back_emf", "supply_voltage") if key not in given]
+    if missing:
+        raise ConfigError(
+            "plant.motor",
+            f"gives no {', '.join(missing)}, and [robot] names no preset with a motor to take them from",
+            "give them in [plant.motor] (e.g. from `ddtrack identify --model motor`), or set robot.preset",
+        )
+    given.setdefault("efficiency", 1.0)
+    given.setdefault("current_limit", given["supply_voltage"] / given["resistance"])  # the stall current
+    return DCMotor(**given)
 
 
 def motor_torque_plant(params: RobotParams, scenario: Any) -> TorqueDrivenPlant:

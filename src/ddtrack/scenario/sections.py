@@ -136,6 +136,28 @@ class RobotConfig(_Section):
         return None if self.preset is None else preset(self.preset)
 
 
+class MotorConfig(_Section):
+    """The constants of each wheel's geared DC motor, referred to the wheel (model.md §1.7); a key left out keeps
+    the [robot] preset's datasheet value."""
+
+    resistance: Positive | None = Field(None, description="Armature resistance R_a [ohm].")
+    torque_constant: Positive | None = Field(
+        None, description="Torque constant k_t at the wheel, gear ratio included [N m/A]."
+    )
+    back_emf: Positive | None = Field(None, description="Back-EMF constant k_e at the wheel [V s/rad].")
+    efficiency: Annotated[float, Field(gt=0.0, le=1.0)] | None = Field(
+        None, description="Gearbox efficiency eta in (0, 1]: the wheel torque is eta k_t i."
+    )
+    supply_voltage: Positive | None = Field(None, description="The most voltage the driver applies, V_s [V].")
+    current_limit: Positive | None = Field(
+        None, description="The driver's current limit i_max [A]; default V_s / R_a without a preset."
+    )
+
+
+#: the plant models that drive their wheels through motors (and so read plant.motor)
+MOTOR_MODELS = ("motor_torque", "motor_velocity", "slip", "slip_velocity")
+
+
 class PlantConfig(_Section):
     """The true robot; every key left out takes the [robot] value."""
 
@@ -169,6 +191,14 @@ class PlantConfig(_Section):
         description=(
             "theta_1..theta_6 [s, s, s m/rad^2, 1, s/m, 1] of model 'lag' (the identified velocity lags, e.g. from "
             "`ddtrack identify`); default the [robot] preset's identified set."
+        ),
+    )
+    motor: MotorConfig | None = Field(
+        None,
+        description=(
+            "The motors of models " + ", ".join(f"'{m}'" for m in MOTOR_MODELS) + " (e.g. from `ddtrack identify "
+            "--model motor`): a [plant.motor] table of resistance, torque_constant, back_emf, efficiency, "
+            "supply_voltage, current_limit; keys left out keep the [robot] preset's datasheet values."
         ),
     )
     velocity_pi: tuple[NonNegative, NonNegative] = Field(
@@ -212,6 +242,12 @@ class PlantConfig(_Section):
 
         if not is_plant(self.model):
             raise FieldError("model", f"unknown plant '{self.model}'", did_you_mean(self.model, plant_kinds()))
+        if self.motor is not None and self.model not in MOTOR_MODELS:
+            raise FieldError(
+                "motor",
+                f"is read only by models {', '.join(MOTOR_MODELS)}, not '{self.model}'",
+                "set plant.model to one of those, or drop [plant.motor]",
+            )
         if self.lag is not None and self.model != "lag":
             raise FieldError(
                 "lag", f"is read only by model 'lag', not '{self.model}'", 'set model = "lag", or drop lag'

@@ -14,11 +14,10 @@ from __future__ import annotations
 from typing import Any
 
 from ..errors import ConfigError
-from ..model import DCMotor, RobotParams, VelocityDriver
-from ..model.motor_plants import motor_from_datasheet
+from ..model import RobotParams, VelocityDriver
 from ..model.slip import SlipPlant, slip_plant_model
 from ..model.slip_velocity import SlipVelocityPlant, slip_velocity_model
-from .motor_configs import scenario_motor
+from .motor_configs import motor_or_none, scenario_motor
 
 
 def _preset(scenario: Any) -> Any:
@@ -48,9 +47,7 @@ def slip_options(scenario: Any) -> dict[str, Any]:
             f"the caster at {caster} m must lie beyond the centre of mass (d = {nominal.com_offset} m), on its side",
             "give a caster position with 0 <= d / caster_position < 1, or leave it out (no caster load)",
         )
-    motor: DCMotor | None = None
-    if robot is not None and robot.motor is not None:
-        motor = motor_from_datasheet(robot.motor)
+    motor = motor_or_none(scenario)
     sim = scenario.simulation
     return {
         "friction": scenario.plant.floor_friction,

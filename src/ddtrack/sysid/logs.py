@@ -1,7 +1,7 @@
 """Logs to identify from: a ROS 2 bag (the inputs on ``/cmd_vel``, or the wheel efforts of ``/joint_states``, and
-the speeds of ``/odom``), or a table (CSV or Parquet) with the columns ``t, v, omega`` and the inputs
-``v_cmd, omega_cmd`` or ``tau_r, tau_l`` (a ``ddtrack run`` folder's ``timeseries.parquet``, or ``ddtrack
-export``'s CSV, whose ``name [unit]`` headers are read by name)."""
+the speeds of ``/odom``), or a table (CSV or Parquet) with the columns ``t, v, omega`` and the inputs ``v_cmd,
+omega_cmd``, ``tau_r, tau_l`` or ``u_r, u_l`` (with the currents ``i_r, i_l``): a ``ddtrack run`` folder's
+``timeseries.parquet``, or ``ddtrack export``'s CSV, whose ``name [unit]`` headers are read by name."""
 
 from __future__ import annotations
 
@@ -13,9 +13,10 @@ import numpy as np
 
 from ..errors import ConfigError
 from .fit import SpeedLog
+from .motor import MotorLog
 
-#: the input columns of a table, per model: velocity commands for the lag model, wheel torques for the body model
-INPUT_COLUMNS = {"lag": ("v_cmd", "omega_cmd"), "body": ("tau_r", "tau_l")}
+#: the input columns of a table, per model: velocity commands (lag), wheel torques (body), armature voltages (motor)
+INPUT_COLUMNS = {"lag": ("v_cmd", "omega_cmd"), "body": ("tau_r", "tau_l"), "motor": ("u_r", "u_l")}
 TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 
@@ -92,7 +93,28 @@ def _held_inputs(path: Path, sent: np.ndarray, values: np.ndarray, odometry: lis
     return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source)
 
 
-def _table_log(path: Path, inputs: tuple[str, str]) -> SpeedLog:
+def read_motor_log(path: Path) -> MotorLog:
+    """The armature voltages ``u_r, u_l`` [V], measured speeds and, where logged, currents ``i_r, i_l`` [A] of a
+    table (CSV or Parquet) or a run folder (a motor plant's ``timeseries.parquet`` has them all). ROS 2 has no
+    standard message for motor voltages, so a bag is refused."""
+    if path.is_dir() and (path / "timeseries.parquet").is_file():
+        path = path / "timeseries.parquet"
+    if path.suffix.lower() not in (".csv", ".parquet"):
+        raise ConfigError(
+            "LOG",
+            f"'{path}' is not a .csv or .parquet table: --model motor reads voltages, which no standard ROS 2 "
+            "message carries",
+            "write a table of t, u_r, u_l, v, omega (and i_r, i_l) from your driver's topics",
+        )
+    columns = _table_columns(path)
+    speeds = _table_log(path, INPUT_COLUMNS["motor"], columns)
+    if "i_r" not in columns or "i_l" not in columns:
+        return MotorLog(speeds)
+    return MotorLog(speeds, np.column_stack([np.asarray(columns[name], dtype=float) for name in ("i_r", "i_l")]))
+
+
+def _table_columns(path: Path) -> dict[str, np.ndarray]:
+    """A table's columns by name (``name [unit]`` headers read as ``name``)."""
     if not path.is_file():
         raise ConfigError("LOG", f"'{path}' does not exist", "give a bag, a .csv or a .parquet file")
     if path.suffix.lower() == ".parquet":
@@ -102,9 +124,12 @@ def _table_log(path: Path, inputs: tuple[str, str]) -> SpeedLog:
             table = pq.read_table(path)
         except (OSError, ValueError) as exc:
             raise ConfigError("LOG", f"'{path}' cannot be read as Parquet ({exc})") from None
-        columns = {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
-    else:
-        columns = _csv_columns(path)
+        return {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
+    return _csv_columns(path)
+
+
+def _table_log(path: Path, inputs: tuple[str, str], columns: dict[str, np.ndarray] | None = None) -> SpeedLog:
+    columns = _table_columns(path) if columns is None else columns
     missing = [name for name in ("t", *inputs, "v", "omega") if name not in columns]
     if missing:
         raise ConfigError(

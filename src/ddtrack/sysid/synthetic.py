@@ -1,4 +1,5 @@
-"""Logs from a known lag model, to check identification against the truth (docs/identification.md).
+"""Logs from known plants (a lag model, a torque-driven body, a voltage-driven robot), to check identification
+against the truth (docs/identification.md).
 
 The base follows ``theta`` under the plan's commands, each acting ``delay`` s after it was sent; what it logs is
 either its speeds plus white noise, or, with ``encoder_counts``, the speeds that odometry derives from quantised
@@ -7,12 +8,21 @@ wheel angles over each sample interval (so the log is also a little late and coa
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
+from typing import Any
 
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from ..model import dynamics
+from ..model.motors import DCMotor, voltage_driver
+from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
 from .excitation import Plan
-from .fit import SpeedLog, simulate
+from .fit import SpeedLog, SpeedModel, simulate
 from .lag import simulate_speeds
+from .motor import MotorLog
 
 FINE = 10  #: simulation points per sample interval
 
@@ -65,23 +75,31 @@ def lag_log(
     return SpeedLog(t=t, command=in_force, speed=measured, source="synthetic lag log with encoders")
 
 
-def torque_plan(
-    *, max_torque: float, duration: float = 30.0, rate: float = 50.0, seed: int = 0
+def reversing_steps(
+    *, amplitude: float, duration: float = 30.0, rate: float = 50.0, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Times [s] and wheel torques (n, 2) [N m] that excite a torque-driven robot without running away: held
-    steps of common and differential torque, each followed by its opposite, so the speeds wander about zero."""
+    """Times [s] and a two-channel input (n, 2) (wheel torques [N m], or voltages [V]) that excite a robot without
+    running away: held steps of common and differential input within +-``amplitude``, each followed by its
+    opposite, so the speeds wander about zero."""
     rng = np.random.default_rng(seed)
     t = np.arange(round(duration * rate)) / rate
-    torque = np.zeros((t.size, 2))
+    steps = np.zeros((t.size, 2))
     begin = 0.5
     while begin < duration - 0.5:
         hold = rng.uniform(0.3, 1.0)
-        push = max_torque * np.array([rng.uniform(-1, 1), rng.uniform(-1, 1)])
+        push = amplitude * np.array([rng.uniform(-1, 1), rng.uniform(-1, 1)])
         for sign, start in ((1.0, begin), (-1.0, begin + hold)):
             span = (t >= start) & (t < start + hold)
-            torque[span] = sign * np.array([push[0] + push[1], push[0] - push[1]]) / 2
+            steps[span] = sign * np.array([push[0] + push[1], push[0] - push[1]]) / 2
         begin += 2 * hold
-    return t, torque
+    return t, steps
+
+
+def torque_plan(
+    *, max_torque: float, duration: float = 30.0, rate: float = 50.0, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reversing_steps` of wheel torques [N m] within +-``max_torque``."""
+    return reversing_steps(amplitude=max_torque, duration=duration, rate=rate, seed=seed)
 
 
 def body_log(
@@ -106,3 +124,78 @@ def body_log(
     rng = np.random.default_rng(seed)
     measured = speeds[::FINE][: len(t)] + rng.normal(size=(len(t), 2)) * np.asarray(noise)
     return SpeedLog(t=t, command=torque, speed=measured, source="synthetic body log")
+
+
+@dataclass(frozen=True)
+class _VoltageDriven:
+    """(v_dot, omega_dot) of a robot whose motors a PWM board drives (model.md §1.7, :func:`voltage_driver`, its
+    clips included), with ``p`` = (m, I_C, d, b_w, tau_c, J_w, R_a, eta k_t, k_e): the truth of a synthetic log,
+    written apart from the fitted model (hashable, so one compiled simulation serves it)."""
+
+    wheel_radius: float
+    half_axle: float
+    supply_voltage: float
+    current_limit: float
+
+    def robot(self, p: Any) -> tuple[RobotParams, DCMotor]:
+        params = RobotParams(
+            mass=p[0],
+            inertia=p[1],
+            com_offset=p[2],
+            wheel_radius=self.wheel_radius,
+            half_axle=self.half_axle,
+            viscous_friction=p[3],
+            coulomb_friction=p[4],
+            wheel_inertia=p[5],
+        )
+        motor = DCMotor(p[6], p[7], p[8], 1.0, self.supply_voltage, self.current_limit)
+        return params, motor
+
+    def __call__(self, p: Array, speed: Array, voltage: Array) -> Array:
+        params, motor = self.robot(p)
+        torque, _ = voltage_driver(motor, voltage, dynamics.wheel_speeds(params, speed))
+        return dynamics.body_acceleration(params, speed, torque, jnp.zeros(2))
+
+
+def motor_log(
+    robot: RobotParams,
+    motor: DCMotor,
+    t: np.ndarray,
+    voltage: np.ndarray,
+    *,
+    noise: tuple[float, float] = (0.0, 0.0),
+    current_noise: float = 0.0,
+    delay: float = 0.0,
+    seed: int = 0,
+) -> MotorLog:
+    """The log of ``robot`` whose wheels ``motor`` turns (efficiency folded into its torque constant), driven by
+    the armature ``voltage`` (n, 2) [V] sent at the times ``t`` [s] and acting ``delay`` [s] later: the voltages
+    as sent, the speeds plus white ``noise`` (std of v [m/s], omega [rad/s]) and the currents drawn plus white
+    ``current_noise`` [A]."""
+    rate = _VoltageDriven(robot.wheel_radius, robot.half_axle, float(motor.supply_voltage), float(motor.current_limit))
+    truth = np.array(
+        [
+            robot.mass,
+            robot.inertia,
+            robot.com_offset,
+            robot.viscous_friction,
+            robot.coulomb_friction,
+            robot.wheel_inertia,
+            motor.resistance,
+            motor.efficiency * motor.torque_constant,
+            motor.back_emf,
+        ],
+        dtype=float,
+    )
+    model = SpeedModel("truth", (), (), (), rate, lambda *_: (np.zeros(0), np.zeros(0)), (), (), ("u_r", "u_l"))
+    fine_t, applied = _applied_finely(t, voltage, delay)
+    speeds = simulate(model, truth, fine_t, applied, np.zeros(2), False)[::FINE][: len(t)]
+    _, true_motor = rate.robot(jnp.asarray(truth))
+    wheels = np.column_stack(
+        wheel_speeds(speeds[:, 0], speeds[:, 1], wheel_radius=robot.wheel_radius, half_axle=robot.half_axle)
+    )
+    _, current = voltage_driver(true_motor, jnp.asarray(applied[::FINE][: len(t)]), jnp.asarray(wheels))
+    rng = np.random.default_rng(seed)
+    measured = speeds + rng.normal(size=(len(t), 2)) * np.asarray(noise)
+    drawn = np.asarray(current) + rng.normal(size=(len(t), 2)) * current_noise
+    return MotorLog(SpeedLog(t=t, command=voltage, speed=measured, source="synthetic motor log"), drawn)

@@ -1,0 +1,176 @@
+"""The motor model of a robot driven by voltages (model.md §1.7, §1.3), as ``ddtrack identify --model motor`` fits
+it (docs/identification.md).
+
+Each wheel's torque is tau_i = g (u_i - k_e phi_dot_i) with g = eta k_t / R_a (L_a = 0). Put into the body model
+(:mod:`ddtrack.sysid.body`) and divided by g, the no-slip robot is linear in the drivetrain constants
+q = (kA_v, kA_md, kA_w, kV, kS) = (M_v / g, m d / g, M_w / g, k_e + b_w / g, tau_c / g)::
+
+    (u_R + u_L) / R   = kA_v v_dot - kA_md omega^2    + (kV (phi_R + phi_L) + kS (s_R + s_L)) / R
+    L (u_R - u_L) / R = kA_w omega_dot + kA_md v omega + L (kV (phi_R - phi_L) + kS (s_R - s_L)) / R
+
+with phi_i the wheel speeds and s_i = tanh(phi_i / eps_f): the body model with voltages for torques, so the same
+fit serves both (WPILib's SysId characterises a drivetrain by the same kS, kV and kA). Voltages and motion fix q
+only: every torque in it is scaled by the one motor gain g, so a known mass anchors it (g = m / kA_v, the wheels'
+spin inertia folded in as in the body model). Currents, where logged, separate the motor itself: the armature
+equation u = R_a i + k_e phi_dot gives R_a and k_e by least squares, then eta k_t = g R_a and the wheels' viscous
+friction b_w = g (kV - k_e); without them the viscous friction is folded into k_e.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..model.motors import DCMotor
+from ..model.traction import wheel_speeds
+from .body import body_model
+from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, simulate
+
+NAMES = ("kA_v", "kA_md", "kA_w", "kV", "kS")
+
+
+def motor_model(*, wheel_radius: float, half_axle: float, friction_smoothing: float = 0.01) -> SpeedModel:
+    """The voltage-driven robot of wheel radius R [m] and half axle L [m]: the body model read in volts."""
+    body = body_model(wheel_radius=wheel_radius, half_axle=half_axle, friction_smoothing=friction_smoothing)
+    return dataclasses.replace(
+        body,
+        name="motor",
+        names=NAMES,
+        units=("V s^2/m^2", "V s^2/m", "V s^2", "V s/rad", "V"),
+        meanings=(
+            "M_v / g, the mass the wheels drive per motor gain g = eta k_t / R_a",
+            "m d / g, the centre of mass's offset",
+            "M_w / g, the yaw inertia about the axle",
+            "k_e + b_w / g, back-EMF and viscous friction per wheel",
+            "tau_c / g, Coulomb friction per wheel",
+        ),
+        input_names=("u_r", "u_l"),
+    )
+
+
+@dataclass(frozen=True)
+class ArmatureFit:
+    """R_a and k_e from u = R_a i + k_e phi_dot over both wheels, with standard errors."""
+
+    resistance: float  #: [ohm]
+    back_emf: float  #: [V s/rad]
+    std: tuple[float, float]
+    noise: float  #: residual spread [V]
+
+
+@dataclass(frozen=True)
+class MotorLog:
+    """A voltage log: ``speeds`` with the armature voltages (u_r, u_l) [V] as its input, and the currents (n, 2) [A]
+    measured at the same times, or None."""
+
+    speeds: SpeedLog
+    current: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class MotorFit:
+    """The drivetrain constants (``drive``, with the voltage delay) and, with currents, the armature's."""
+
+    drive: SpeedFit
+    armature: ArmatureFit | None
+
+
+def armature_fit(
+    voltage: np.ndarray, current: np.ndarray, wheel_speed: np.ndarray, predicted_speed: np.ndarray
+) -> ArmatureFit:
+    """u = R_a i + k_e phi_dot over both wheels' samples (one motor type) by instrumental variables: the measured
+    current and wheel speed are the regressors, the voltage and the fitted model's wheel speed (``predicted_speed``,
+    free of measurement noise) the instruments. Plain least squares would read the speed's noise as a smaller k_e
+    (errors in variables). Raises ConfigError when currents and speeds do not vary apart."""
+    rows = np.column_stack([np.ravel(current), np.ravel(wheel_speed)])
+    instruments = np.column_stack([np.ravel(voltage), np.ravel(predicted_speed)])
+    target = np.ravel(voltage)
+    cross = instruments.T @ rows
+    if np.linalg.cond(cross) > 1e12:
+        raise ConfigError("LOG", "the currents and wheel speeds do not vary apart", "drive steps and reversals")
+    solution = np.linalg.solve(cross, instruments.T @ target)
+    residual = target - rows @ solution
+    inverse = np.linalg.inv(cross)
+    covariance = inverse @ (instruments.T @ instruments) @ inverse.T * float(residual @ residual) / (residual.size - 2)
+    std = np.sqrt(np.diag(covariance))
+    return ArmatureFit(float(solution[0]), float(solution[1]), (float(std[0]), float(std[1])), float(residual.std()))
+
+
+def identify_motor(
+    log: MotorLog,
+    *,
+    wheel_radius: float,
+    half_axle: float,
+    friction_smoothing: float = 0.01,
+    max_delay: float = 0.3,
+) -> MotorFit:
+    """The drivetrain constants and voltage delay of the robot that recorded ``log``; with its currents, R_a and
+    k_e (the voltages taken at the same delay as the motion's)."""
+    model = motor_model(wheel_radius=wheel_radius, half_axle=half_axle, friction_smoothing=friction_smoothing)
+    drive = identify(model, log.speeds, max_delay=max_delay)
+    if log.current is None:
+        return MotorFit(drive, None)
+    t = np.asarray(log.speeds.t, dtype=float)
+    voltage = delayed_inputs(np.asarray(log.speeds.command, dtype=float), round(drive.delay / np.median(np.diff(t))))
+    measured = np.asarray(log.speeds.speed, dtype=float)
+    predicted = simulate(model, drive.params, t, voltage, measured[0], False)
+    wheels = [
+        np.column_stack(wheel_speeds(s[:, 0], s[:, 1], wheel_radius=wheel_radius, half_axle=half_axle))
+        for s in (measured, predicted)
+    ]
+    return MotorFit(drive, armature_fit(voltage, np.asarray(log.current, dtype=float), *wheels))
+
+
+def time_constants(params: np.ndarray, *, wheel_radius: float, half_axle: float) -> tuple[float, float]:
+    """The drive's time constants [s] of v and omega without friction's corner and the centre of mass's coupling:
+    kA_v R^2 / (2 kV) and kA_w R^2 / (2 L^2 kV) (the back-EMF and viscous drag against the inertia)."""
+    kA_v, _, kA_w, kV, _ = (float(value) for value in params)
+    return kA_v * wheel_radius**2 / (2 * kV), kA_w * wheel_radius**2 / (2 * half_axle**2 * kV)
+
+
+def plant_fragment(
+    fit: MotorFit, *, mass: float, supply_voltage: float | None, preset_motor: DCMotor | None
+) -> tuple[dict[str, float], dict[str, float], list[str]]:
+    """The ``[plant]`` keys of the equivalent robot, its ``[plant.motor]`` keys, and notes on what was folded or
+    taken from elsewhere. ``mass`` [kg] anchors the motor gain; ``preset_motor`` gives R_a when no currents were
+    logged (a ConfigError names the options when neither is there); ``supply_voltage`` [V] is written if given."""
+    kA_v, kA_md, kA_w, kV, kS = (float(value) for value in fit.drive.params)
+    gain = mass / kA_v  # g = eta k_t / R_a [N m/V]
+    md, inertia_axle = gain * kA_md, gain * kA_w
+    notes = [
+        f"the motor gain eta k_t / R_a = {gain:.4g} N m/V comes from the mass {mass:g} kg: the wheels' spin inertia "
+        "is folded into the robot's mass and inertia, and gearbox efficiency into k_t (efficiency = 1)"
+    ]
+    if fit.armature is not None:
+        resistance, back_emf = fit.armature.resistance, fit.armature.back_emf
+        viscous = gain * (kV - back_emf)
+        if viscous < 0.0:
+            notes.append(f"kV is below the currents' k_e by {back_emf - kV:.2g} V s/rad: viscous friction set to 0")
+            viscous = 0.0
+    elif preset_motor is not None:
+        resistance, back_emf, viscous = float(preset_motor.resistance), kV, 0.0
+        notes.append(
+            f"no currents logged: R_a = {resistance:.4g} ohm is the preset's datasheet value, and the wheels' viscous "
+            "friction is folded into k_e"
+        )
+    else:
+        raise ConfigError(
+            "LOG",
+            "without currents the motor's resistance cannot be told from its torque constant",
+            "log the currents (i_r, i_l), or give --preset for its datasheet resistance",
+        )
+    plant = {
+        "mass": mass,
+        "inertia": inertia_axle - md**2 / mass,
+        "com_offset": md / mass,
+        "viscous_friction": viscous,
+        "coulomb_friction": gain * kS,
+        "wheel_inertia": 0.0,
+    }
+    motor = {"resistance": resistance, "torque_constant": gain * resistance, "back_emf": back_emf, "efficiency": 1.0}
+    if supply_voltage is not None:
+        motor["supply_voltage"] = supply_voltage
+    return plant, motor, notes
