@@ -39,7 +39,7 @@ LAYERS = [
     {"scenario", "metrics", "adaptation", "plausibility"},
     {"runner", "plotting"},
     {"animation", "schema"},
-    {"rundir"},
+    {"rundir", "board"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},
     {"suite", "robot_suite", "sysid"},
