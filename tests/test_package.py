@@ -43,6 +43,7 @@ LAYERS = [
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},
     {"suite", "robot_suite", "sysid"},
+    {"scenario_suite"},
     {"cluster"},
     {"cli"},
 ]
