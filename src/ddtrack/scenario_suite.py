@@ -84,17 +84,15 @@ def first_difference(reference: Scenario, other: Scenario) -> tuple[str, str, st
     return None
 
 
-def _read(path: Path) -> Scenario:
-    """A ``--scenario`` file, validated; its problems named with ``--scenario`` and the file."""
+def _read(path: Path) -> tuple[Scenario, str]:
+    """A ``--scenario`` file, validated, and what its plant takes; its problems named with ``--scenario`` and the
+    file."""
     try:
-        return load_scenario(path)
+        scenario = load_scenario(path)
+        return scenario, plant_input(scenario)  # building the plant checks what it reads beyond the parameters
     except ConfigError as exc:
         where = f"{path}: {exc.field}: " if exc.field else ""  # a problem with the file itself names the file
         raise ConfigError("--scenario", where + exc.message, exc.suggestion) from None
-
-
-def _fits(scenario: Scenario, output: str) -> bool:
-    return output == plant_input(scenario)
 
 
 def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
@@ -103,7 +101,7 @@ def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
         raise ConfigError("--scenario", "needs at least one scenario file")
     entries: list[BenchEntry] = []
     for path in paths:
-        scenario = _read(path)
+        scenario, drives = _read(path)
         for earlier in entries:
             if earlier.label == path.stem:
                 raise ConfigError(
@@ -121,8 +119,8 @@ def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
                     f"{path.name} differs from {first} in {key} ({mine} vs {theirs}): "
                     "a fair comparison changes only [controller]",
                 )
-        output, plant = controller_output(scenario.controller), scenario.plant.model
-        if not _fits(scenario, output):
+        output = controller_output(scenario.controller)
+        if output != drives:
             hint = (
                 'give it a law over cmd_vel (controller.inner = "none", or kinematic_backstepping)'
                 if output == "torque"
@@ -132,7 +130,7 @@ def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
             raise ConfigError(
                 "--scenario",
                 f"{path.name}: its controller ({scenario.controller.kind}) outputs {output} commands, but its plant "
-                f"'{plant}' takes {plant_input(scenario)} commands",
+                f"'{scenario.plant.model}' takes {drives} commands",
                 hint,
             )
         entries.append(BenchEntry(path.stem, scenario, {"scenario": str(path)}))
