@@ -87,6 +87,7 @@ def check_identify_and_tune(out: str) -> None:
     guide = (ROOT / "docs" / "identification.md").read_text()
     for line in summary:
         assert line in guide, f"docs/identification.md does not show this line of the worked example:\n{line}"
+    assert "| tuned | backstepping |" in out and "| default | backstepping |" in out  # compared by bench --scenario
     (delay,) = number(rf"command delay {NUMBER} s", out)
     assert delay == pytest.approx(0.05)  # the real robot's hidden latency, found
     better, low, _ = number(rf"tuned over default: {NUMBER} \[{NUMBER}, {NUMBER}\] % lower", out)

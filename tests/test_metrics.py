@@ -276,10 +276,10 @@ def test_mean_ci_on_the_domain_edge_and_one_value():
 
 def test_the_leaderboards_saturation_interval_is_a_percentage_inside_0_100():
     # the case: saturation 0.04 [-0.021, 0.1] from a t-interval on fractions
+    from ddtrack._format import interval_text
     from ddtrack.metrics import mean_ci
-    from ddtrack.suite import _ci
 
     summary = mean_ci([0.0, 0.0, 0.0, 0.2], domain="fraction")
-    text = _ci(summary, 100.0)
+    text = interval_text(summary, 100.0)
     low, high = (float(v) for v in text.split("[")[1].rstrip("]").split(","))
     assert text.startswith("5.00 [") and 0.0 <= low < 5.0 < high <= 100.0

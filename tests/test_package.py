@@ -39,10 +39,11 @@ LAYERS = [
     {"scenario", "metrics", "adaptation", "plausibility"},
     {"runner", "plotting"},
     {"animation", "schema"},
-    {"rundir"},
+    {"rundir", "board"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},
     {"suite", "robot_suite", "sysid"},
+    {"scenario_suite"},
     {"cluster"},
     {"cli"},
 ]

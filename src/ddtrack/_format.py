@@ -32,6 +32,15 @@ def with_interval(mean: float | None, low: float | None, high: float | None, dig
     return f"{text} [{significant(low, digits)}, {significant(high, digits)}]"
 
 
+def interval_text(summary: dict | None, scale: float = 1.0, digits: int = 3) -> str:
+    """'mean [low, high]' of a :func:`ddtrack.metrics.mean_ci` summary, each times ``scale`` (100 for a fraction in
+    %); '' where there is no summary or no mean (a leaderboard's empty cell)."""
+    if not summary or summary.get("mean") is None:
+        return ""
+    low, high = (None if summary.get(k) is None else scale * summary[k] for k in ("ci_low", "ci_high"))
+    return with_interval(scale * summary["mean"], low, high, digits)
+
+
 def percent(fraction: float | None, digits: int = 3) -> str:
     """A fraction in [0, 1] as a percentage '9.20 %' (the one convention for saturation in printed output)."""
     return MISSING if fraction is None else f"{significant(100.0 * fraction, digits)} %"

@@ -12,11 +12,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ._format import significant, with_interval
+from ._format import interval_text, significant
+from .board import IMPLAUSIBLE, interval_columns, warning_codes
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
-
-#: warnings that say a run asked for something the real robot cannot give
-IMPLAUSIBLE = ("friction_exceeds_floor", "friction_beyond_any_floor", "wheel_speed_beyond_motor", "torque_beyond_motor")
 
 
 def rows(records: dict[str, dict]) -> list[dict]:
@@ -27,7 +25,6 @@ def rows(records: dict[str, dict]) -> list[dict]:
         if labels.get("study") != "robots":
             continue
         metrics = record["metrics"] or {}
-        codes = {w["code"] for w in metrics.get("warnings") or []}
         out.append(
             {
                 "controller": record["configuration"]["controller"],
@@ -35,7 +32,7 @@ def rows(records: dict[str, dict]) -> list[dict]:
                 "status": record["status"],
                 **{k: labels[k] for k in ("robot", "trajectory", "condition")},
                 "e_tr_mean": metrics.get("e_tr_mean") if record["status"] == "ok" else None,
-                "implausible": bool(codes & set(IMPLAUSIBLE)),
+                "implausible": bool(warning_codes(metrics) & set(IMPLAUSIBLE)),
             }
         )
     return out
@@ -138,12 +135,6 @@ NN_QUESTIONS = (
 )
 
 
-def _ci(summary: dict | None) -> str:
-    if not summary or summary.get("mean") is None:
-        return ""
-    return with_interval(summary["mean"], summary.get("ci_low"), summary.get("ci_high"))
-
-
 def summarize(
     records: dict[str, dict], robots: Sequence[str], conditions: Sequence[str], entries: Sequence[str], left_out: list
 ) -> dict:
@@ -183,9 +174,9 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         lines.append("| controller | " + " | ".join(shown) + " | all | failures | implausible |")
         lines.append("|" + "---|" * (len(shown) + 4))
         for e in board:
-            values = " | ".join(_ci(e.get(c)) for c in shown)
+            values = " | ".join(interval_text(e.get(c)) for c in shown)
             lines.append(
-                f"| {e['controller']} | {values} | {_ci(e['all'])} | {e['failures']}/{e['runs']} | "
+                f"| {e['controller']} | {values} | {interval_text(e['all'])} | {e['failures']}/{e['runs']} | "
                 f"{e['implausible']}/{e['runs']} |"
             )
         lines.append("")
@@ -226,7 +217,7 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
             "|---|---|---|---|",
         ]
         for robot, question, value in answers:
-            lines.append(f"| {robot} | {question} | {_ci(value)} | {value['n']} |")
+            lines.append(f"| {robot} | {question} | {interval_text(value)} | {value['n']} |")
         lines.append("")
     if summary["left_out"]:
         why: dict[tuple[str, str], set[str]] = {}
@@ -249,7 +240,7 @@ def board_table(summary: dict, conditions: Sequence[str]) -> pa.Table:
         for e in board:
             row = {"robot": robot, **{k: e[k] for k in ("controller", "runs", "failures", "implausible")}}
             for key in ("all", *conditions):
-                row |= {f"{key}_{stat}": (e.get(key) or {}).get(stat) for stat in ("mean", "ci_low", "ci_high")}
+                row |= interval_columns(key, e.get(key))
             flat.append(row)
     return pa.Table.from_pylist(flat)
 

@@ -15,20 +15,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
-import io
-import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-import pyarrow.csv
-import pyarrow.parquet as pq
-
+from .board import write_board
 from .errors import ConfigError
-from .outdir import atomic_write
 from .robot_board import board_markdown, board_table, figure, summarize
 from .robots import PRESETS
 from .scenario import controller_kind
@@ -137,6 +130,26 @@ def condition_overrides(robot: Robot, condition: str) -> list[str] | None:
     raise ValueError(f"unknown condition {condition!r}")
 
 
+def entry_controller(
+    entry: Entry, params: Mapping[str, Any], max_speed: float | None, max_yaw_rate: float | None
+) -> dict[str, Any]:
+    """The ``[controller]`` of ``entry`` on a robot whose nominal ``params`` (``mass`` [kg], ``wheel_radius`` [m])
+    and top speeds (``max_speed`` [m/s], ``max_yaw_rate`` [rad/s]; None: unknown) are given: its kind's defaults,
+    the entry's keys, the clamps at the top speeds, and MPPI's sampling scaled to the robot."""
+    controller: dict[str, Any] = {"kind": entry.kind, **dict(entry.keys)}
+    fields = controller_kind(entry.kind).config.model_fields
+    if max_speed is not None and max_yaw_rate is not None and "max_velocity" in fields:  # what the robot can do
+        controller |= {"max_velocity": max_speed, "max_yaw_rate": max_yaw_rate}
+        if "rotate_yaw_rate" in fields:  # Nav2's rotation in place, within what the robot can turn
+            controller["rotate_yaw_rate"] = min(fields["rotate_yaw_rate"].default, max_yaw_rate)
+    if entry.kind == "mppi":  # its defaults suit the paper's robot: keep them per unit of acceleration
+        paper = PRESETS["paper"].params
+        scale = params["mass"] * params["wheel_radius"] / (paper["mass"] * paper["wheel_radius"])
+        noise, effort = fields["noise_std"].default, fields["effort_weight"].default
+        controller |= {"noise_std": [scale * n for n in noise], "effort_weight": effort / scale**2}
+    return controller
+
+
 def base_scenario(robot: Robot, entry: Entry, trajectory: str) -> dict[str, Any] | None:
     """The scenario of ``entry`` on ``robot``'s plant along ``trajectory``, as a dict; None where the robot
     takes no command of the entry's output."""
@@ -144,17 +157,7 @@ def base_scenario(robot: Robot, entry: Entry, trajectory: str) -> dict[str, Any]
     if plant is None:
         return None
     preset = PRESETS[robot.preset]
-    controller: dict[str, Any] = {"kind": entry.kind, **dict(entry.keys)}
-    fields = controller_kind(entry.kind).config.model_fields
-    if preset.max_speed is not None and "max_velocity" in fields:  # the clamps at what the robot can do
-        controller |= {"max_velocity": preset.max_speed, "max_yaw_rate": preset.max_yaw_rate}
-        if "rotate_yaw_rate" in fields:  # Nav2's rotation in place, within what the robot can turn
-            controller["rotate_yaw_rate"] = min(fields["rotate_yaw_rate"].default, preset.max_yaw_rate)
-    if entry.kind == "mppi":  # its defaults suit the paper's robot: keep them per unit of acceleration
-        paper = PRESETS["paper"].params
-        scale = preset.params["mass"] * preset.params["wheel_radius"] / (paper["mass"] * paper["wheel_radius"])
-        noise, effort = fields["noise_std"].default, fields["effort_weight"].default
-        controller |= {"noise_std": [scale * n for n in noise], "effort_weight": effort / scale**2}
+    controller = entry_controller(entry, preset.params, preset.max_speed, preset.max_yaw_rate)
     return {
         "name": f"robots_{robot.preset}_{trajectory}",
         "simulation": {
@@ -183,13 +186,13 @@ class RobotSuite:
     overrides: tuple[str, ...] = ()
 
 
-def entry_labels(requested: Sequence[str] | None) -> list[str]:
-    """Every entry, or the requested ones (checked)."""
+def entry_labels(requested: Sequence[str] | None, where: str = "--suite robots") -> list[str]:
+    """Every entry, or the requested ones (checked; an error names ``where`` they were asked for)."""
     names = list(requested) if requested else list(ENTRY)
     for name in names:
         if name not in ENTRY:
             raise ConfigError(
-                "--controllers", f"unknown controller '{name}' for --suite robots", f"choose from: {', '.join(ENTRY)}"
+                "--controllers", f"unknown controller '{name}' for {where}", f"choose from: {', '.join(ENTRY)}"
             )
     if len(set(names)) != len(names):
         raise ConfigError("--controllers", "lists a controller twice")
@@ -250,21 +253,10 @@ def run_robot_suite(
 ) -> dict:
     """Run every cell through the sweep runner (resumable), then write ``leaderboard.md``, ``.csv``, ``.parquet``,
     ``.json``, the per-run ``results.*`` and ``robots.png``."""
-    import matplotlib.pyplot as plt
-
     plan = plan_robot_suite(suite, entries)
     outcome = run_sweep(plan, out, client, on_record=on_record)
     records = {k: r for k, r in read_records(out).items() if k in plan.runs}
     summary = summarize(records, suite.robots, suite.conditions, entries, cells(suite, entries)[1])
-    atomic_write(out / "leaderboard.md", lambda f: f.write(board_markdown(summary, suite.conditions).encode()))
-    table = board_table(summary, suite.conditions)
-    atomic_write(out / "leaderboard.parquet", lambda f: pq.write_table(table, f))
-    buffer = io.BytesIO()
-    pa.csv.write_csv(table, buffer)
-    atomic_write(out / "leaderboard.csv", lambda f: f.write(buffer.getvalue()))
-    fig = figure(summary, suite.conditions)
-    atomic_write(out / "robots.png", partial(fig.savefig, format="png", dpi=110))
-    plt.close(fig)
     result = {
         "suite": dataclasses.asdict(suite),
         "controllers": list(entries),
@@ -274,5 +266,6 @@ def run_robot_suite(
         "not_ok": outcome.not_ok,
         **summary,
     }
-    atomic_write(out / "leaderboard.json", lambda f: f.write((json.dumps(result, indent=2) + "\n").encode()))
+    markdown, table = board_markdown(summary, suite.conditions), board_table(summary, suite.conditions)
+    write_board(out, markdown, table, {"robots.png": figure(summary, suite.conditions)}, result)
     return result

@@ -11,23 +11,20 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.csv
-import pyarrow.parquet as pq
 
-from ._format import significant, with_interval
+from ._format import interval_text as _ci
+from ._format import significant
+from .board import STATISTICS, interval_columns, run_statistics, write_board
 from .errors import ConfigError
-from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
+from .metrics import pooled_improvement
 from .outdir import atomic_write
 from .scenario import CONTROLLERS, kanayama_gains, load_scenario
 from .shipped import scenario_path
@@ -194,9 +191,6 @@ def plan_suite(suite: Suite, controllers: Sequence[str], tuned_gains: Sequence[f
 # --- the leaderboard -----------------------------------------------------------------------------------------
 
 
-STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "effort", "saturation_fraction")
-
-
 def _rows(records: dict[str, dict], study: str) -> list[dict]:
     rows = []
     for record in records.values():
@@ -222,15 +216,7 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
     board = []
     for name in controllers:
         mine = [r for r in rows if r["controller"] == name]
-        entry: dict[str, Any] = {
-            "controller": name,
-            "runs": len(mine),
-            "failures": sum(r["status"] != "ok" for r in mine),
-        }
-        for key in STATISTICS:
-            entry[key] = mean_ci(
-                [r.get(key) if r["status"] == "ok" else None for r in mine], domain=METRIC_DOMAINS[key]
-            )
+        entry: dict[str, Any] = {"controller": name, **run_statistics(mine)}
         for reference in (BASELINE, TUNED):
             others = [by_cell.get((reference, r["trajectory"], r["level"], r["seed"]), {}) for r in mine]
             entry[f"improvement_over_{reference}"] = (
@@ -240,13 +226,6 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
             )
         board.append(entry)
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
-
-
-def _ci(summary: dict | None, scale: float = 1.0) -> str:
-    if not summary or summary["mean"] is None:
-        return ""
-    low, high = (None if summary[k] is None else scale * summary[k] for k in ("ci_low", "ci_high"))
-    return with_interval(scale * summary["mean"], low, high)
 
 
 def board_markdown(board: list[dict], cells: dict) -> str:
@@ -290,12 +269,7 @@ def board_table(board: list[dict]) -> pa.Table:
     for e in board:
         row = {"controller": e["controller"], "runs": e["runs"], "failures": e["failures"]}
         for key in (*STATISTICS, f"improvement_over_{BASELINE}", f"improvement_over_{TUNED}"):
-            summary = e[key] or {}
-            row |= {
-                f"{key}_mean": summary.get("mean"),
-                f"{key}_ci_low": summary.get("ci_low"),
-                f"{key}_ci_high": summary.get("ci_high"),
-            }
+            row |= interval_columns(key, e[key])
         flat.append(row)
     return pa.Table.from_pylist(flat)
 
@@ -389,8 +363,6 @@ def run_suite(
     (``leaderboard.md``, ``.csv``, ``.parquet``), the per-run ``results.parquet``/``.csv`` and the figures."""
     import tomllib
 
-    import matplotlib.pyplot as plt
-
     tuned = None
     if TUNED in controllers:
         stored = out / "tuned.toml"
@@ -407,16 +379,6 @@ def run_suite(
     outcome = run_sweep(plan, out, client, on_record=on_record)
     records = {k: r for k, r in read_records(out).items() if k in plan.runs}
     board = leaderboard(records, controllers)
-    cells = cell_means(records)
-    atomic_write(out / "leaderboard.md", lambda f: f.write(board_markdown(board, cells).encode()))
-    table = board_table(board)
-    atomic_write(out / "leaderboard.parquet", lambda f: pq.write_table(table, f))
-    buffer = io.BytesIO()
-    pa.csv.write_csv(table, buffer)
-    atomic_write(out / "leaderboard.csv", lambda f: f.write(buffer.getvalue()))
-    for file, fig in figures(records, controllers, suite).items():
-        atomic_write(out / file, partial(fig.savefig, format="png", dpi=110))
-        plt.close(fig)
     summary = {
         "suite": dataclasses.asdict(suite),
         "controllers": list(controllers),
@@ -427,5 +389,6 @@ def run_suite(
         "not_ok": outcome.not_ok,
         "leaderboard": board,
     }
-    atomic_write(out / "leaderboard.json", lambda f: f.write((json.dumps(summary, indent=2) + "\n").encode()))
+    markdown = board_markdown(board, cell_means(records))
+    write_board(out, markdown, board_table(board), figures(records, controllers, suite), summary)
     return summary

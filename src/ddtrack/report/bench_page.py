@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import LogNorm
 
+from ..errors import RunError
 from ..plotting import plt
 from ._page import (
     KINDS,
@@ -43,6 +44,11 @@ def _bench_page(folder: Path) -> dict:
     summary = _read_json(path)
     if is_robots_summary(summary):  # `bench --suite robots`: a board per robot, its own page
         return _robots_page(folder, summary)
+    if isinstance(summary, Mapping) and "reference" in summary and "entries" in summary:  # `bench --scenario`
+        raise RunError(
+            f"'{folder}' is a `ddtrack bench --scenario` folder, which `ddtrack report` does not show yet\n"
+            f"  hint: its leaderboard.md and entries.png hold the board"
+        )
     board = _field(summary, "leaderboard", path=path)
     suite = _field(summary, "suite", path=path)
     table = _read_table(folder / "results.parquet", BENCH_COLUMNS)

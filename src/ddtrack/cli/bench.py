@@ -1,0 +1,191 @@
+"""``ddtrack bench``: the suites (``--suite quick|standard|robots``) and the user's own scenarios (``--scenario``),
+registered on the ``ddtrack`` group."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from ..cluster import check_cluster_options, cluster_options, dask_client
+from ..errors import ConfigError
+from . import cli, enable_compilation_cache, overwrite_option, progress_bar
+
+SCENARIO_SEEDS = 10  #: seeds per entry of a --scenario bench, unless --seeds says otherwise
+
+
+def _names(controllers: str | None) -> list[str] | None:
+    """``--controllers A,B`` as a list; None when not given."""
+    return [c.strip() for c in controllers.split(",") if c.strip()] if controllers else None
+
+
+@cli.command(short_help="Rank controllers over a suite, or on your own robot (--scenario FILE ...).")
+@click.option(
+    "--suite",
+    "suite_name",
+    type=click.Choice(["quick", "standard", "robots"]),
+    help="quick: 3 trajectories, the paper's uncertainty, 2 seeds; standard: 6 x 3 levels x 5 seeds; robots: "
+    "4 robot presets x 2 paths (a figure eight, a filleted square) x 6 conditions x 3 seeds, each robot on the "
+    "plant it really has. [default: quick, without --scenario]",
+)
+@click.option(
+    "--scenario",
+    "scenarios",
+    multiple=True,
+    metavar="FILE.toml",
+    type=click.Path(path_type=Path),
+    help="Your own robot (repeatable; not with --suite): each file is an entry labelled by its stem, and the files "
+    "may differ only in [controller]. Improvements are over the first file's entry, paired by seed.",
+)
+@click.option(
+    "--seeds",
+    type=click.IntRange(min=1, max=1000),
+    help=f"Seeds per entry of a --scenario bench, 0 .. N-1 on common random numbers [default: {SCENARIO_SEEDS}]; "
+    "the suites fix their own.",
+)
+@click.option(
+    "--controllers",
+    metavar="A,B,...",
+    help="Controllers to rank [default: all, and backstepping_tuned; for robots, every torque law and every "
+    "velocity law, label/cmd_vel for a law over cmd_vel]. With --scenario: entries to add, the robots suite's "
+    "labels, each with its defaults for the first file's robot (one the plant does not take is refused).",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=Path("runs/bench"),
+    show_default=True,
+    help="Result folder (rerun to resume): leaderboard.md/.csv/.parquet/.json, results.*, figures.",
+)
+@overwrite_option
+@cluster_options
+def bench(
+    suite_name: str | None,
+    scenarios: tuple[Path, ...],
+    seeds: int | None,
+    controllers: str | None,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
+    """Rank controllers on common random numbers through the sweep runner (resumable), with 95 % intervals and
+    paired improvements; see docs/benchmarks.md.
+
+    \b
+    --suite quick|standard: every controller over trajectories, uncertainty levels and seeds, with a
+      robustness map over mass and friction;
+    --suite robots: on four robot presets, each on the plant it really has, under six conditions;
+    --scenario FILE.toml ...: on your own robot. Each file is an entry; every section but [controller]
+      must resolve the same in every file (the first differing key is named otherwise). --controllers adds
+      registered controllers on the first file's robot. Writes leaderboard.md/.csv/.parquet/.json (mean e_tr,
+      RMS, max, effort, saturation with intervals; runs ok and diverged; grip and motor flags; the improvement
+      over the first file's entry, paired by seed), results.* and entries.png.
+
+    \b
+    Example: ddtrack bench --scenario default.toml --scenario tuned.toml --seeds 5 --out runs/mine
+    """
+    check_cluster_options(scheduler, scheduler_file, workers)
+    if scenarios and suite_name is not None:
+        raise ConfigError(
+            "--scenario", "cannot be combined with --suite: a bench runs your files or a suite", "drop one of them"
+        )
+    if scenarios:
+        return _bench_scenarios(
+            scenarios, seeds or SCENARIO_SEEDS, controllers, out, overwrite, scheduler, scheduler_file, workers
+        )
+    if seeds is not None:
+        raise ConfigError(
+            "--seeds", "applies to --scenario benches: the suites fix their own (quick 2, standard 5, robots 3)"
+        )
+    if suite_name == "robots":
+        return _bench_robots(controllers, out, overwrite, scheduler, scheduler_file, workers)
+    from ..outdir import check_output, start_resumable
+    from ..suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
+
+    suite_name = suite_name or "quick"
+    names = controller_names(_names(controllers))
+    plan_suite(SUITES[suite_name], names, (1.0, 55.0, 15.0))  # every cell resolves: bad input writes nothing
+    study = f"{suite_name}: {', '.join(names)}"
+    resume = check_output(out, command="bench", overwrite=overwrite, study=study)  # the same suite resumes
+    enable_compilation_cache()
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        start_resumable(out, command="bench", study=study, resume=resume)
+        summary = run_suite(
+            SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total)
+        )
+    from ..sweep import read_records
+
+    click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
+    click.echo(
+        f"{summary['runs']} runs ({summary['reused']} reused), {summary['not_ok']} diverged or non-finite, "
+        f"{summary['errors']} errors; wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, "
+        "robustness.png, boxplots.png"
+    )
+    return 1 if summary["errors"] else 0
+
+
+def _bench_robots(
+    controllers: str | None,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
+    """``bench --suite robots``: every cell planned first (bad input writes nothing), then run and summarised."""
+    from ..outdir import check_output, start_resumable
+    from ..robot_suite import RobotSuite, board_markdown, entry_labels, plan_robot_suite, run_robot_suite
+
+    names = entry_labels(_names(controllers))
+    suite = RobotSuite()
+    plan_robot_suite(suite, names)
+    study = f"robots: {', '.join(names)}"
+    resume = check_output(out, command="bench", overwrite=overwrite, study=study)
+    enable_compilation_cache()
+    start = time.perf_counter()
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        start_resumable(out, command="bench", study=study, resume=resume)
+        summary = run_robot_suite(suite, names, out, client, on_record=lambda done, total: advance(done, total=total))
+    click.echo(board_markdown(summary, suite.conditions), nl=False)
+    click.echo(
+        f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "
+        f"{summary['not_ok']} diverged or non-finite, {summary['errors']} errors; "
+        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, robots.png"
+    )
+    return 1 if summary["errors"] else 0
+
+
+def _bench_scenarios(
+    paths: tuple[Path, ...],
+    seeds: int,
+    controllers: str | None,
+    out: Path,
+    overwrite: bool,
+    scheduler: str | None,
+    scheduler_file: Path | None,
+    workers: int | None,
+) -> int:
+    """``bench --scenario``: every entry read and checked first (bad input writes nothing), then run and ranked."""
+    from ..outdir import check_output, start_resumable
+    from ..scenario_suite import FIGURE, bench_entries, board_markdown, run_scenario_bench
+
+    entries = bench_entries(paths, _names(controllers) or ())
+    study = f"scenario: {', '.join(e.label for e in entries)}"  # the same entries resume, whatever the seeds
+    resume = check_output(out, command="bench", overwrite=overwrite, study=study)
+    enable_compilation_cache()
+    start = time.perf_counter()
+    with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
+        start_resumable(out, command="bench", study=study, resume=resume)
+        summary = run_scenario_bench(
+            entries, seeds, out, client, on_record=lambda done, total: advance(done, total=total)
+        )
+    click.echo(board_markdown(summary["leaderboard"], summary["reference"]), nl=False)
+    click.echo(
+        f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "
+        f"{summary['not_ok']} diverged or non-finite, {summary['errors']} errors; "
+        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, {FIGURE}"
+    )
+    return 1 if summary["errors"] else 0

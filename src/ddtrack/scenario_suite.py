@@ -1,0 +1,351 @@
+"""``ddtrack bench --scenario FILE ...``: controllers compared on the user's own robot.
+
+Each ``--scenario`` file is one entry, labelled by its file stem; ``--controllers`` adds the robots suite's entries
+(:data:`ddtrack.robot_suite.ENTRY`), each with its defaults for the first file's robot
+(:func:`ddtrack.robot_suite.entry_controller`). A fair comparison changes only the controller, so every entry's
+resolved scenario must equal the first file's outside ``[controller]`` (and :data:`IGNORED`), and every entry must
+drive the scenario's plant (a velocity law on a torque plant would drive an ideal unicycle instead; a torque law
+cannot drive a velocity plant). Every entry runs seeds 0 .. N-1 through :func:`ddtrack.sweep.run_sweep` (resumable,
+keyed by hash) on common random numbers: seed s gives every entry the same plant draw, disturbance and noise, so
+the entries pair by seed, and each entry's improvement over the first file's is paired that way.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+
+from ._format import interval_text, significant
+from .board import GRIP, MOTOR, STATISTICS, interval_columns, run_statistics, warning_codes, write_board
+from .errors import ConfigError
+from .metrics import pooled_improvement
+from .robot_suite import ENTRY, entry_controller, entry_labels
+from .scenario import Scenario, controller_output, load_scenario, plant_kind, to_toml_dict, validate_scenario
+from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
+
+STUDY = "scenario"  #: the ``label.study`` of every run of a scenario bench
+#: keys that may differ between the files besides ``[controller]``: they do not change what a run does (the bench
+#: runs its own seeds, 0 .. N-1)
+IGNORED = ("name", "description", "simulation.seed")
+FIGURE = "entries.png"
+
+
+@dataclass(frozen=True)
+class BenchEntry:
+    """One entry of the leaderboard: its label, its resolved scenario, and where it came from (the results'
+    ``set.*`` columns: the file, and for a ``--controllers`` entry the ``[controller]`` it was given)."""
+
+    label: str
+    scenario: Scenario
+    source: dict[str, Any]
+
+
+def plant_input(scenario: Scenario) -> str:
+    """What the scenario's true plant takes: ``"torque"`` or ``"velocity"`` (or another input a plugin declares)."""
+    plant = plant_kind(scenario.plant.model).model(scenario)(scenario.plant_params())
+    return str(plant.input_kind)
+
+
+def _flat(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested tables as one level of dotted keys, in order."""
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        if isinstance(value, Mapping):
+            out |= _flat(value, f"{prefix}{key}.")
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def experiment(scenario: Scenario) -> dict[str, Any]:
+    """What a fair comparison keeps fixed: every resolved key of ``scenario`` (dotted) outside ``[controller]``
+    and :data:`IGNORED`."""
+    table = {k: v for k, v in to_toml_dict(scenario).items() if k != "controller"}
+    return {k: v for k, v in _flat(table).items() if k not in IGNORED}
+
+
+def first_difference(reference: Scenario, other: Scenario) -> tuple[str, str, str] | None:
+    """The first key of :func:`experiment` on which ``other`` differs from ``reference``: (key, other's value,
+    reference's value) as TOML text ("unset" where a side lacks it); None when they describe the same experiment."""
+    mine, theirs = experiment(other), experiment(reference)
+
+    def shown(table: dict[str, Any], key: str) -> str:
+        return toml_value(table[key]) if key in table else "unset"
+
+    for key in dict.fromkeys([*theirs, *mine]):
+        if (key in mine) != (key in theirs) or (key in mine and mine[key] != theirs[key]):
+            return key, shown(mine, key), shown(theirs, key)
+    return None
+
+
+def _read(path: Path) -> tuple[Scenario, str]:
+    """A ``--scenario`` file, validated, and what its plant takes; its problems named with ``--scenario`` and the
+    file."""
+    try:
+        scenario = load_scenario(path)
+        return scenario, plant_input(scenario)  # building the plant checks what it reads beyond the parameters
+    except ConfigError as exc:
+        where = f"{path}: {exc.field}: " if exc.field else ""  # a problem with the file itself names the file
+        raise ConfigError("--scenario", where + exc.message, exc.suggestion) from None
+
+
+def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
+    """One entry per file: read, labels distinct, the same experiment as the first file's, on a plant it drives."""
+    if not paths:
+        raise ConfigError("--scenario", "needs at least one scenario file")
+    entries: list[BenchEntry] = []
+    for path in paths:
+        scenario, drives = _read(path)
+        for earlier in entries:
+            if earlier.label == path.stem:
+                raise ConfigError(
+                    "--scenario",
+                    f"{earlier.source['scenario']} and {path} have the same stem '{path.stem}', the entries' label",
+                    "rename one of the files",
+                )
+        if entries:
+            difference = first_difference(entries[0].scenario, scenario)
+            if difference is not None:
+                key, mine, theirs = difference
+                first = Path(entries[0].source["scenario"]).name
+                raise ConfigError(
+                    "--scenario",
+                    f"{path.name} differs from {first} in {key} ({mine} vs {theirs}): "
+                    "a fair comparison changes only [controller]",
+                )
+        output = controller_output(scenario.controller)
+        if output != drives:
+            hint = (
+                'give it a law over cmd_vel (controller.inner = "none", or kinematic_backstepping)'
+                if output == "torque"
+                else "a velocity law would drive an ideal unicycle, not this robot: use a torque law, or a plant that "
+                "takes velocity commands (`ddtrack list plants`)"
+            )
+            raise ConfigError(
+                "--scenario",
+                f"{path.name}: its controller ({scenario.controller.kind}) outputs {output} commands, but its plant "
+                f"'{scenario.plant.model}' takes {drives} commands",
+                hint,
+            )
+        entries.append(BenchEntry(path.stem, scenario, {"scenario": str(path)}))
+    return entries
+
+
+def _controller_entries(first: BenchEntry, labels: Sequence[str], taken: Sequence[str]) -> list[BenchEntry]:
+    """The robots suite's entries ``labels`` on ``first``'s experiment, each with its defaults for that robot."""
+    scenario, path = first.scenario, Path(first.source["scenario"])
+    drives = plant_input(scenario)
+    fitting = [e.label for e in ENTRY.values() if e.output == drives]
+    entries = []
+    for label in entry_labels(labels, where="bench --scenario"):
+        entry = ENTRY[label]
+        if label in taken:
+            raise ConfigError(
+                "--controllers",
+                f"'{label}' is also the label of a --scenario file ({label}.toml): each entry needs its own label",
+                "rename the file",
+            )
+        if entry.output != drives:
+            raise ConfigError(
+                "--controllers",
+                f"{label} outputs {entry.output} commands, but the plant of {path.name} "
+                f"('{scenario.plant.model}') takes {drives} commands",
+                f"choose from: {', '.join(fitting)}" if fitting else "",
+            )
+        preset = scenario.robot.preset_robot()
+        params = {"mass": scenario.robot.mass, "wheel_radius": scenario.robot.wheel_radius}  # what the law believes
+        speeds = (preset.max_speed, preset.max_yaw_rate) if preset is not None else (None, None)
+        controller = entry_controller(entry, params, *speeds)
+        data = to_toml_dict(scenario) | {"controller": controller}
+        try:
+            resolved = validate_scenario(data, base_dir=path.parent)
+        except ConfigError as exc:
+            message = f"{label} on {path.name}: {exc.field}: {exc.message}"
+            raise ConfigError("--controllers", message, exc.suggestion) from None
+        entries.append(BenchEntry(label, resolved, {"scenario": str(path), "controller": controller}))
+    return entries
+
+
+def bench_entries(paths: Sequence[Path], controllers: Sequence[str] = ()) -> list[BenchEntry]:
+    """Every entry of ``bench --scenario``, checked before anything runs (a :class:`ConfigError` naming the option
+    otherwise): the files' entries, then the ``controllers`` added on the first file's experiment."""
+    files = _file_entries(paths)
+    if not controllers:
+        return files
+    return files + _controller_entries(files[0], controllers, [e.label for e in files])
+
+
+def plan_entries(entries: Sequence[BenchEntry], seeds: int) -> Plan:
+    """Seeds 0 .. ``seeds`` - 1 of every entry; keys hash the entry's label with its scenario and seed."""
+    configurations = [Configuration(e.label, e.source, e.scenario, {"study": STUDY}) for e in entries]
+    runs = {}
+    for index, configuration in enumerate(configurations):
+        cell = canonical({"labels": configuration.labels, "controller": configuration.controller})
+        for seed in range(seeds):
+            key = hashlib.sha256((run_key(configuration.scenario, seed) + cell).encode()).hexdigest()
+            runs[key] = (index, seed)
+    return Plan(configurations, runs, chunk=min(seeds, 64))
+
+
+# --- the leaderboard -----------------------------------------------------------------------------------------
+
+
+def rows(records: Mapping[str, dict]) -> list[dict]:
+    """One flat row per run of a scenario bench: entry, seed, status, metrics, and its grip and motor flags."""
+    out = []
+    for record in records.values():
+        if (record["configuration"].get("labels") or {}).get("study") != STUDY:
+            continue
+        metrics = record["metrics"] or {}
+        codes = warning_codes(metrics)
+        out.append(
+            {
+                **metrics,
+                "entry": record["configuration"]["controller"],
+                "seed": record["seed"],
+                "status": record["status"],
+                "grip": bool(codes & set(GRIP)),
+                "motor": bool(codes & set(MOTOR)),
+            }
+        )
+    return sorted(out, key=lambda r: (r["entry"], r["seed"]))
+
+
+def _error(row: dict) -> float | None:
+    return row.get("e_tr_mean") if row["status"] == "ok" else None
+
+
+def leaderboard(records: Mapping[str, dict], entries: Sequence[BenchEntry]) -> list[dict]:
+    """Per entry: the statistics of its runs (:func:`ddtrack.board.run_statistics`), runs ok, diverged (or
+    non-finite) and raised, runs flagged for grip and for the motors, each seed's mean e_tr, and the pooled paired
+    improvement of the mean e_tr over the first entry's, by seed; ranked by mean e_tr."""
+    runs = rows(records)
+    reference = {r["seed"]: _error(r) for r in runs if r["entry"] == entries[0].label}
+    board = []
+    for entry in entries:
+        mine = [r for r in runs if r["entry"] == entry.label]
+        improvement = None
+        if entry.label != entries[0].label:
+            baselines = [reference[r["seed"]] if r["seed"] in reference else None for r in mine]
+            improvement = pooled_improvement(baselines, [_error(r) for r in mine])
+        board.append(
+            {
+                "entry": entry.label,
+                "controller": entry.scenario.controller.kind,
+                **run_statistics(mine),
+                "ok": sum(r["status"] == "ok" for r in mine),
+                "diverged": sum(r["status"] in ("diverged", "non_finite") for r in mine),
+                "errors": sum(r["status"] not in ("ok", "diverged", "non_finite") for r in mine),
+                "grip": sum(r["grip"] for r in mine),
+                "motor": sum(r["motor"] for r in mine),
+                "e_tr_mean_by_seed": {str(r["seed"]): _error(r) for r in mine},
+                "improvement": improvement,
+            }
+        )
+    return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
+
+
+def board_markdown(board: Sequence[dict], reference: str) -> str:
+    """``leaderboard.md``: per entry, mean [95 % CI over seeds] of each statistic, runs ok and diverged, runs
+    flagged implausible, the paired improvement over ``reference``; then each seed's mean e_tr."""
+    lines = [
+        "Mean [95 % CI] over seeds; e_tr over each run's metric window. vs "
+        f"{reference}: the pooled paired improvement of mean e_tr over the first --scenario entry, by seed "
+        "(positive: better). grip, motor: runs that asked for more grip than the floor has, or more wheel speed "
+        "or torque than the motors give.",
+        "",
+        "| entry | controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] "
+        f"| ok | diverged | grip | motor | vs {reference} [%] |",
+        "|" + "---|" * 12,
+    ]
+    for e in board:
+        lines.append(
+            f"| {e['entry']} | {e['controller']} | {interval_text(e['e_tr_mean'])} | {interval_text(e['e_tr_rms'])} "
+            f"| {interval_text(e['e_tr_max'])} | {interval_text(e['effort'])} "
+            f"| {interval_text(e['saturation_fraction'], 100.0)} | {e['ok']}/{e['runs']} | {e['diverged']} "
+            f"| {e['grip']}/{e['runs']} | {e['motor']}/{e['runs']} | {interval_text(e['improvement'])} |"
+        )
+    seeds = sorted({int(s) for e in board for s in e["e_tr_mean_by_seed"]})
+    lines += ["", "Mean e_tr [m] per seed (every entry meets the same plant draw, disturbance and noise):", ""]
+    lines.append("| entry | " + " | ".join(f"seed {s}" for s in seeds) + " |")
+    lines.append("|" + "---|" * (len(seeds) + 1))
+    for e in board:
+        values = [e["e_tr_mean_by_seed"].get(str(s)) for s in seeds]
+        shown = ("failed" if v is None else significant(v) for v in values)
+        lines.append(f"| {e['entry']} | " + " | ".join(shown) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def board_table(board: Sequence[dict]) -> pa.Table:
+    """The leaderboard as a flat table (``leaderboard.csv``, ``.parquet``): a row per entry, a mean, a ci_low and
+    a ci_high column per statistic and for the improvement."""
+    flat = []
+    for e in board:
+        row = {k: e[k] for k in ("entry", "controller", "runs", "ok", "diverged", "errors", "grip", "motor")}
+        for key in (*STATISTICS, "improvement"):
+            row |= interval_columns(key, e[key])
+        flat.append(row)
+    return pa.Table.from_pylist(flat)
+
+
+def figure(board: Sequence[dict], reference: str) -> Any:
+    """``entries.png``: each entry's mean e_tr with its 95 % interval over seeds, and every seed's value."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(layout="constrained", figsize=(6.4, 1.2 + 0.45 * len(board)))
+    for i, e in enumerate(board):
+        values = [v for v in e["e_tr_mean_by_seed"].values() if v is not None]
+        ax.plot(values, [i] * len(values), "o", color="0.6", markersize=3, label="a seed" if i == 0 else None)
+        summary = e["e_tr_mean"]
+        if summary["mean"] is None:
+            continue
+        low, high = (summary["mean"] if summary[k] is None else summary[k] for k in ("ci_low", "ci_high"))
+        color = "C1" if e["entry"] == reference else "C0"
+        error = [[summary["mean"] - low], [high - summary["mean"]]]
+        ax.errorbar(summary["mean"], i, xerr=error, fmt="D", color=color, capsize=4)
+    ax.set(
+        yticks=range(len(board)),
+        yticklabels=[e["entry"] for e in board],
+        xlabel="mean e_tr per run [m]",
+        title=f"mean and 95 % interval over seeds (orange: {reference}, the reference)",
+    )
+    ax.set_xlim(left=0.0)
+    ax.invert_yaxis()  # the best on top, as in leaderboard.md
+    return fig
+
+
+def run_scenario_bench(
+    entries: Sequence[BenchEntry],
+    seeds: int,
+    out: Path,
+    client: Any,
+    *,
+    on_record: Callable[[int, int], None] = lambda done, total: None,
+) -> dict:
+    """Run every entry's seeds through the sweep runner (resumable), then write ``leaderboard.md``, ``.csv``,
+    ``.parquet``, ``.json``, the per-run ``results.*`` and ``entries.png``; return ``leaderboard.json``'s content."""
+    plan = plan_entries(entries, seeds)
+    outcome = run_sweep(plan, out, client, on_record=on_record)
+    records = {k: r for k, r in read_records(out).items() if k in plan.runs}
+    board = leaderboard(records, entries)
+    reference = entries[0].label
+    summary = {
+        "scenarios": [e.source["scenario"] for e in entries if "controller" not in e.source],
+        "entries": [e.label for e in entries],
+        "reference": reference,
+        "seeds": seeds,
+        "runs": outcome.total,
+        "reused": outcome.reused,
+        "errors": outcome.errors,
+        "not_ok": outcome.not_ok,
+        "leaderboard": board,
+    }
+    figures = {FIGURE: figure(board, reference)}
+    write_board(out, board_markdown(board, reference), board_table(board), figures, summary)
+    return summary

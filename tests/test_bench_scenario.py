@@ -1,0 +1,182 @@
+"""``ddtrack bench --scenario``: the user's own scenarios as leaderboard entries. Two files that differ in gains and
+a registered controller added on their robot run on common random numbers through the sweep runner, the board is
+computed from the runs (the paired improvement recomputed here from results.parquet), a rerun reuses every run, and
+unfair or bad input is refused before anything is written. Short runs of the paper's robot on one worker keep it
+fast."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from ddtrack.cli import main
+from ddtrack.metrics import pooled_improvement
+from ddtrack.robots import PRESETS
+from ddtrack.scenario_suite import bench_entries, plan_entries
+
+SCENARIO = """name = "{name}"
+description = "{name} gains"
+[simulation]
+duration = 3.0
+metric_window = [1.0, 3.0]
+[robot]
+preset = "paper"
+[plant]
+mass = {mass}
+[randomize]
+mass = {{ distribution = "uniform", relative = 0.1 }}
+[disturbance]
+kind = "gaussian"
+mean = [0.03, 0.0]
+std = [0.05, 0.05]
+[trajectory]
+kind = "circle"
+center = [0.0, 0.0]
+radius = 3.0
+speed = 0.5
+start_angle = -1.5707963267948966
+[initial]
+pose = [0.0, -2.9, 0.0]
+[controller]
+kind = "backstepping"
+gains = {gains}
+"""
+SEEDS = 3
+
+
+def write(folder, stem, *, gains=(1.0, 55.0, 15.0), mass=12.0, name=None):
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{stem}.toml"
+    path.write_text(SCENARIO.format(name=name or stem, gains=list(gains), mass=mass))
+    return path
+
+
+def bench(*args):
+    """``ddtrack bench ARGS`` in-process: (exit code, stdout)."""
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = main(["bench", *map(str, args)])
+    return code, stdout.getvalue()
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    from ddtrack.cluster import local_cluster
+
+    folder = tmp_path_factory.mktemp("mine")
+    files = [write(folder, "default"), write(folder, "tuned", gains=(2.0, 80.0, 20.0), name="other")]
+    out = folder / "bench"
+    args = [a for f in files for a in ("--scenario", f)] + ["--controllers", "ltv_lqr", "--seeds", SEEDS]
+    with local_cluster(1) as cluster:
+        address = cluster.scheduler_address
+        first = bench(*args, "--out", out, "--scheduler", address)
+        summary = json.loads((out / "leaderboard.json").read_text())
+        again = bench(*args, "--out", out, "--scheduler", address)
+    return files, out, first, summary, again
+
+
+def test_two_files_and_an_added_controller_make_one_board_from_the_runs(finished):
+    _files, out, (code, stdout), summary, _ = finished
+    assert code == 0, stdout
+    assert summary["entries"] == ["default", "tuned", "ltv_lqr"] and summary["reference"] == "default"
+    assert summary["runs"] == 3 * SEEDS and summary["errors"] == 0 and summary["reused"] == 0
+    runs = pq.read_table(out / "results.parquet").to_pylist()
+    board = {e["entry"]: e for e in summary["leaderboard"]}
+    for label in summary["entries"]:
+        mine = [r for r in runs if r["controller"] == label]
+        assert sorted(r["seed"] for r in mine) == list(range(SEEDS))
+        assert board[label]["ok"] == SEEDS and board[label]["diverged"] == 0
+        assert board[label]["e_tr_mean"]["mean"] == pytest.approx(np.mean([r["e_tr_mean"] for r in mine]))
+    assert board["ltv_lqr"]["controller"] == "ltv_lqr" and board["tuned"]["controller"] == "backstepping"
+    # the paired improvement over the first file's entry, recomputed from the per-seed results
+    default = {r["seed"]: r["e_tr_mean"] for r in runs if r["controller"] == "default"}
+    for label in ("tuned", "ltv_lqr"):
+        mine = sorted((r for r in runs if r["controller"] == label), key=lambda r: r["seed"])
+        by_hand = pooled_improvement([default[r["seed"]] for r in mine], [r["e_tr_mean"] for r in mine])
+        assert board[label]["improvement"] == pytest.approx(by_hand)
+        assert board[label]["improvement"]["n"] == SEEDS
+    assert board["default"]["improvement"] is None
+    means = [e["e_tr_mean"]["mean"] for e in summary["leaderboard"]]
+    assert means == sorted(means)  # ranked by mean tracking error
+    table = pq.read_table(out / "leaderboard.parquet")
+    assert table.column("entry").to_pylist() == [e["entry"] for e in summary["leaderboard"]]
+    assert "improvement_ci_low" in table.column_names and (out / "leaderboard.csv").is_file()
+    text = (out / "leaderboard.md").read_text()
+    assert "| tuned | backstepping |" in text and "vs default [%]" in text and "seed 2" in text
+    assert text in stdout
+    assert (out / "entries.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_rerun_reuses_every_run(finished):
+    _files, out, _, summary, (code, stdout) = finished
+    assert code == 0 and f"{3 * SEEDS} runs ({3 * SEEDS} reused)" in stdout
+    assert json.loads((out / "leaderboard.json").read_text())["leaderboard"] == summary["leaderboard"]
+
+
+def test_report_says_it_does_not_show_a_scenario_bench_yet(finished, cli, tmp_path):
+    _files, out, *_ = finished
+    code, _, stderr = cli("report", out, "--out", tmp_path / "report.html")
+    assert code == 2 and "bench --scenario" in stderr and "leaderboard.md" in stderr
+    assert not (tmp_path / "report.html").exists()
+
+
+def test_entries_meet_the_same_experiment_and_pair_by_seed(finished):
+    files, *_ = finished
+    entries = bench_entries(files, ["ltv_lqr"])
+    plan = plan_entries(entries, SEEDS)
+    experiments = [c.scenario.model_dump(exclude={"controller", "name", "description"}) for c in plan.configurations]
+    assert all(e == experiments[0] for e in experiments)
+    assert sorted(seed for index, seed in plan.runs.values() if index == 2) == list(range(SEEDS))
+    assert entries[2].source["controller"]["kind"] == "ltv_lqr"  # the defaults, not the file's gains
+
+
+def test_an_added_controller_takes_the_presets_clamps(tmp_path):
+    text = SCENARIO.format(name="burger", gains=[1.0, 55.0, 15.0], mass=1.0)
+    text = text.replace('preset = "paper"', 'preset = "turtlebot3_burger"').replace("radius = 3.0", "radius = 0.5")
+    text = text.replace("speed = 0.5", "speed = 0.1").replace("-2.9", "-0.5").replace("mass = 1.0", "")
+    text = text.replace('kind = "backstepping"', 'kind = "backstepping"\ninner = "none"').replace("[plant]\n", "")
+    path = tmp_path / "burger.toml"
+    path.write_text(text.replace("[randomize]", '[plant]\nmodel = "slip_velocity"\n[randomize]'))
+    (_, added) = bench_entries([path], ["kinematic_backstepping"])
+    burger = PRESETS["turtlebot3_burger"]
+    assert added.scenario.controller.max_velocity == burger.max_speed
+    assert added.scenario.controller.max_yaw_rate == burger.max_yaw_rate
+    assert added.scenario.plant.model == "slip_velocity"
+
+
+@pytest.mark.parametrize(
+    "case, field, words",
+    [
+        ("differs", "--scenario", "tuned.toml differs from default.toml in plant.mass (13.0 vs 12.0)"),
+        ("same stem", "--scenario", "have the same stem 'default'"),
+        ("collision", "--controllers", "'backstepping' is also the label of a --scenario file"),
+        ("unknown", "--controllers", "unknown controller 'ltv_lq'"),
+        ("plant", "--controllers", "kinematic_backstepping outputs velocity commands, but the plant"),
+        ("missing", "--scenario", "does not exist"),
+        ("invalid", "--scenario", "plant.mass"),
+        ("suite", "--scenario", "cannot be combined with --suite"),
+        ("seeds", "--seeds", "the suites fix their own"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, case, field, words):
+    default = write(tmp_path, "default")
+    other = {  # each case writes only its own files
+        "differs": lambda: ["--scenario", write(tmp_path, "tuned", mass=13.0)],
+        "same stem": lambda: ["--scenario", write(tmp_path.joinpath("sub"), "default")],
+        "collision": lambda: ["--scenario", write(tmp_path, "backstepping"), "--controllers", "backstepping"],
+        "unknown": lambda: ["--controllers", "ltv_lq"],
+        "plant": lambda: ["--controllers", "kinematic_backstepping"],
+        "missing": lambda: ["--scenario", tmp_path / "nope.toml"],
+        "invalid": lambda: ["--scenario", write(tmp_path, "bad", mass=-1.0)],
+        "suite": lambda: ["--suite", "quick"],
+    }
+    args = ["--suite", "quick", "--seeds", "3"] if case == "seeds" else ["--scenario", default, *other[case]()]
+    code, _, stderr = cli("bench", *args, "--out", tmp_path / "out")
+    assert code == 2 and stderr.startswith(f"error: {field}") and words in stderr, stderr
+    assert len(stderr.strip().splitlines()) <= 2 and "Traceback" not in stderr  # the error, and a hint
+    assert not (tmp_path / "out").exists()
