@@ -31,7 +31,7 @@ from ..integrators import rk4_step
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
 SUBSTEPS = 4  #: RK4 steps per sample interval of the simulation (a lag of 5 samples is integrated to 1e-6)
 MIN_SAMPLES = 80
-#: [s] output-error window: about 7 of the slowest lag we fit (0.3 s), so a window's free start fades early in it
+#: [s] output-error window: 7 of the slowest lag we fit (0.3 s), so most of it answers commands, not its free start
 WINDOW = 2.0
 
 
