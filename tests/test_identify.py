@@ -7,11 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
+from scipy.signal import lfilter
 
 from ddtrack.errors import ConfigError
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
 from ddtrack.ros.messages import header, message, planar_pose, twist, typestore
 from ddtrack.sysid import SpeedLog, body_log, excitation_plan, identify_body, identify_lag, lag_log, torque_plan
+from ddtrack.sysid.fit import WINDOW, cut
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 PLAN = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=60.0, rate=20.0, seed=0)
@@ -40,6 +42,17 @@ def test_the_lag_model_is_recovered_within_its_reported_uncertainty(conditions, 
     assert all(fit.delay == pytest.approx(delay, abs=1e-9) for fit in fits)
     assert all(fit.interval_mean is interval_mean for fit in fits)  # odometry's interval means are recognised
     assert min(min(fit.fit_percent.values()) for fit in fits) > 90.0
+
+
+def test_the_output_error_simulates_each_window_of_the_fitted_record_from_its_own_start():
+    plan = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=30.0, rate=20.0, seed=0)
+    log = lag_log(THETA, plan, seed=0, noise=(0.005, 0.01))
+    windows = cut(log.t[:450], log.command[:450], log.speed[:450], WINDOW)
+    assert WINDOW == 2.0 and windows.mask.shape == (12, 40) and windows.mask.sum() == 450  # the last: 10 + padding
+    assert np.array_equal(windows.speed[:, 0], log.speed[:450:40])  # where each window starts from
+    fit, whole = identify_lag(log, max_delay=0.0), identify_lag(log, max_delay=0.0, window=np.inf)
+    assert fit.samples == (450, 150) and fit.windows == 12 and whole.windows == 1
+    assert np.all(fit.std > whole.std)  # the windows' starts are fitted too: they take some of the log's information
 
 
 def test_a_log_that_never_turns_while_driving_says_the_coupling_terms_are_not_separated():
@@ -172,6 +185,28 @@ def test_the_body_model_is_recovered_within_its_reported_uncertainty():
         z.append((fit.params - BODY) / fit.std)
     covered = np.abs(np.array(z)) <= 1.96
     assert covered.mean() >= 0.85 and np.all(np.abs(np.array(z)) < 5), np.round(np.array(z), 2)  # 100 intervals
+
+
+def test_windows_keep_the_intervals_more_honest_under_a_slowly_varying_torque_the_model_lacks():
+    """A torque the body model lacks, 0.3 mN m per wheel varying over about 3 s (a floor not quite level), is far
+    below the plan's torques, but the body's speeds forget it only over M_v R^2 / (2 b_w) = 3.4 s: simulated over
+    the whole record, its effect accumulates into residuals correlated for seconds, which the whole-record fit
+    reads as signal (its intervals hold the truth about half the time). Each 2 s window restarts from its own
+    speeds, so the disturbance acts over 2 s at most (about three quarters hold it: inside a window it still
+    acts)."""
+    t, torque = torque_plan(max_torque=1.5, duration=16.0, rate=50.0, seed=0)
+    keep = np.exp(-(t[1] - t[0]) / 3.0)  # an Ornstein-Uhlenbeck torque, correlated over 3 s
+    z = {WINDOW: [], np.inf: []}
+    for seed in range(10):
+        white = np.random.default_rng(seed).normal(size=(t.size, 2))
+        slope = 3e-4 * np.sqrt(1 - keep**2) * lfilter([1.0], [1.0, -keep], white, axis=0)  # std 0.3 mN m
+        log = body_log(BODY, t, torque + slope, wheel_radius=RADIUS, half_axle=HALF, noise=(0.002, 0.005), seed=seed)
+        logged = SpeedLog(t, torque, log.speed, "a floor not quite level")  # the torques as commanded
+        for window, scores in z.items():
+            fit = identify_body(logged, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.0, window=window)
+            scores.append((fit.params - BODY) / fit.std)
+    covered = {window: float(np.mean(np.abs(scores) <= 1.96)) for window, scores in z.items()}
+    assert covered[np.inf] < 0.65 and covered[WINDOW] > covered[np.inf] + 0.15, covered  # 50 intervals each
 
 
 def test_ddtrack_identifies_its_own_torque_plant_from_a_bag_of_a_closed_loop_run(tmp_path, cli):

@@ -22,7 +22,7 @@ from jax import Array
 from ..model.dynamics import body_acceleration
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
-from .fit import SpeedFit, SpeedLog, SpeedModel, identify
+from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify
 
 NAMES = ("M_v", "md", "M_w", "viscous_friction", "coulomb_friction")
 
@@ -92,11 +92,18 @@ def body_model(*, wheel_radius: float, half_axle: float, friction_smoothing: flo
 
 
 def identify_body(
-    log: SpeedLog, *, wheel_radius: float, half_axle: float, friction_smoothing: float = 0.01, max_delay: float = 0.3
+    log: SpeedLog,
+    *,
+    wheel_radius: float,
+    half_axle: float,
+    friction_smoothing: float = 0.01,
+    max_delay: float = 0.3,
+    window: float = WINDOW,
 ) -> SpeedFit:
-    """The body model and torque delay of the robot that recorded ``log`` (its wheel torques as ``log.command``)."""
+    """The body model and torque delay of the robot that recorded ``log`` (its wheel torques as ``log.command``),
+    the output error over windows of ``window`` [s]."""
     model = body_model(wheel_radius=wheel_radius, half_axle=half_axle, friction_smoothing=friction_smoothing)
-    return identify(model, log, max_delay=max_delay)
+    return identify(model, log, max_delay=max_delay, window=window)
 
 
 def plant_keys(fit: SpeedFit) -> dict[str, float]:

@@ -3,12 +3,14 @@
 A model here maps a parameter vector, the body speeds (v, omega) and a two-channel input (velocity commands, or
 wheel torques) to the speeds' rates, and is linear in its parameters once the rates are known. For each input
 delay tried (whole samples), an equation-error fit (linear least squares on Savitzky-Golay smoothed speeds and
-derivatives) starts an output-error fit: the model simulated under the logged inputs (held between samples, RK4)
-from free initial speeds, Levenberg-Marquardt on the residuals' exact Jacobian (``jax.jacfwd`` through the
-simulation), each channel weighted by its own residual spread. The measured speeds are read either as instants or
-as means over each sample interval (odometry's encoder increments); the delay and reading with the smallest
-residual win. Standard errors come from the Gauss-Newton covariance s^2 (J^T J)^-1; the last quarter of the log is
-held out to measure the prediction.
+derivatives) starts an output-error fit: the fitted record cut into windows of ``WINDOW`` seconds, each simulated
+under the logged inputs (held between samples, RK4) from its own free initial speeds (multiple shooting: a slowly
+varying disturbance the model lacks cannot accumulate over the whole record), Levenberg-Marquardt on the
+residuals' exact Jacobian (``jax.jacfwd`` through each window's simulation, the windows' starts eliminated from
+the normal equations), each channel weighted by its own residual spread. The measured speeds are read either as
+instants or as means over each sample interval (odometry's encoder increments); the delay and reading with the
+smallest residual win. Standard errors come from the Gauss-Newton covariance s^2 (J^T J)^-1, the windows' starts
+counted as fitted; the last quarter of the log is held out and predicted by one simulation from the last fitted sample.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -28,6 +31,8 @@ from ..integrators import rk4_step
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
 SUBSTEPS = 4  #: RK4 steps per sample interval of the simulation (a lag of 5 samples is integrated to 1e-6)
 MIN_SAMPLES = 80
+#: [s] output-error window: 7 of the slowest lag we fit (0.3 s), so most of it answers commands, not its free start
+WINDOW = 2.0
 
 
 @dataclass(frozen=True)
@@ -73,11 +78,13 @@ class SpeedFit:
     noise: np.ndarray  #: (2,) residual spread of v [m/s] and omega [rad/s] on the fitted samples
     fit_percent: dict[str, float]  #: 100 (1 - |y - y_hat| / |y - mean y|) per speed, on the held-out quarter
     samples: tuple[int, int]  #: samples fitted, held out
+    windows: int  #: output-error windows the fitted samples were cut into, each simulated from its own start
     notes: tuple[str, ...] = field(default=())  #: what this log could not separate
 
 
-def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3) -> SpeedFit:
-    """Fit ``model`` to ``log``, trying input delays of 0 to ``max_delay`` [s] in whole samples.
+def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window: float = WINDOW) -> SpeedFit:
+    """Fit ``model`` to ``log``, trying input delays of 0 to ``max_delay`` [s] in whole samples, the output error
+    over windows of ``window`` [s] (``np.inf``: one simulation of the whole fitted record).
 
     Raises ConfigError for a log that cannot identify the model: too short, not increasing in time, an input
     channel that never changes, a measured speed that never changes."""
@@ -91,9 +98,11 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3) -> Spe
         delayed = delayed_inputs(inputs, k)[fitted]
         start = equation_error(model, t[fitted], delayed, speed[fitted])
         for mean in (False, True):
-            fits[k, mean] = output_error(model, t[fitted], delayed, speed[fitted], start, interval_mean=mean)
-    k, mean = min(fits, key=lambda key: fits[key][2])
-    params, std, _, noise = fits[k, mean]
+            fits[k, mean] = output_error(
+                model, t[fitted], delayed, speed[fitted], start, interval_mean=mean, window=window
+            )
+    k, mean = min(fits, key=lambda key: fits[key].cost)
+    params, std, _, noise, windows = fits[k, mean]
     predicted = simulate(model, params, t[n_fit - 1 :], delayed_inputs(inputs, k)[n_fit - 1 :], speed[n_fit - 1], mean)
     held = speed[n_fit:]
     fit_percent = {
@@ -112,6 +121,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3) -> Spe
         noise=noise,
         fit_percent=fit_percent,
         samples=(n_fit, len(t) - n_fit),
+        windows=windows,
         notes=unseparated(model, params, std),
     )
 
@@ -188,13 +198,92 @@ def _simulate(rate, params, dt, inputs, start, interval_mean):
     return jnp.concatenate([start[None], speeds])
 
 
-def _weighted_residuals(p, rate, dt, inputs, measured, weights, interval_mean):
-    """Simulated minus measured speeds over each channel's spread, for p = (params, initial v, initial omega)."""
-    return ((_simulate(rate, p[:-2], dt, inputs, p[-2:], interval_mean) - measured) / weights).ravel()
+class Windows(NamedTuple):
+    """The fitted record cut into k consecutive windows of m samples, the last padded with zero-length intervals."""
+
+    step: np.ndarray  #: (k, m - 1) the intervals between a window's samples [s]
+    inputs: np.ndarray  #: (k, m - 1, 2) the input held over each interval
+    speed: np.ndarray  #: (k, m, 2) the measured speeds
+    mask: np.ndarray  #: (k, m) 1 on a logged sample, 0 on padding
 
 
-_residuals = jax.jit(_weighted_residuals, static_argnums=(1, 6))
-_jacobian = jax.jit(jax.jacfwd(_weighted_residuals), static_argnums=(1, 6))
+def cut(t: np.ndarray, inputs: np.ndarray, speed: np.ndarray, window: float) -> Windows:
+    """Windows of ``window`` [s] (m = window / median step samples, at least 2; one window if it exceeds the log)
+    starting every m samples; the interval from a window's last sample to the next window's first is not
+    simulated, since the next window starts from its own free speeds."""
+    n = len(t)
+    m = int(min(n, max(2.0, np.round(window / np.median(np.diff(t))))))
+    k = -(-n // m)
+    pad = k * m - n
+    step = np.concatenate([[0.0], np.diff(t), np.zeros(pad)]).reshape(k, m)[:, 1:]  # the interval ending at each
+    held = np.concatenate([inputs[:1], inputs[:-1], np.zeros((pad, 2))]).reshape(k, m, 2)[:, 1:]
+    measured = np.concatenate([speed, np.zeros((pad, 2))]).reshape(k, m, 2)
+    return Windows(step, held, measured, (np.arange(k * m) < n).astype(float).reshape(k, m))
+
+
+def _window_residuals(rate, interval_mean, params, weights, start, step, inputs, measured, mask):
+    """One window simulated from its own start, minus the measured speeds, over each channel's spread: (2 m,), zero
+    on padding (a padded interval has zero length, so the simulation just holds its state there)."""
+    simulated = _simulate(rate, params, step, inputs, start, interval_mean)
+    return ((simulated - measured) / weights * mask[:, None]).ravel()
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _residuals(rate, interval_mean, params, starts, windows, weights):
+    """Every window's residuals, (k, 2 m), the windows simulated side by side."""
+    return jax.vmap(lambda s, *w: _window_residuals(rate, interval_mean, params, weights, s, *w))(starts, *windows)
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _jacobians(rate, interval_mean, params, starts, windows, weights):
+    """Each window's exact Jacobian (forward mode through its simulation) on the model's parameters, (k, 2 m, p),
+    and on its own start, (k, 2 m, 2): a window's residuals depend on no other window's start."""
+
+    def one(start, *window):
+        f = lambda p, s: _window_residuals(rate, interval_mean, p, weights, s, *window)  # noqa: E731
+        return jax.jacfwd(f, argnums=(0, 1))(params, start)
+
+    return jax.vmap(one)(starts, *windows)
+
+
+def normal_blocks(j_params: np.ndarray, j_starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """J^T J of all windows stacked, in its blocks [[A, B], [B^T, diag(D_1 .. D_k)]]: A = sum_i Jp_i^T Jp_i (p, p),
+    B_i = Jp_i^T Js_i (k, p, 2), D_i = Js_i^T Js_i (k, 2, 2); the starts of two windows never meet."""
+    a = np.einsum("kri,krj->ij", j_params, j_params)
+    return a, np.einsum("kri,krj->kij", j_params, j_starts), np.einsum("kri,krj->kij", j_starts, j_starts)
+
+
+def schur(a: np.ndarray, b: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The window starts eliminated: S = A - sum_i B_i D_i^-1 B_i^T, the normal matrix of the model's parameters
+    alone (S^-1 is the parameters' block of (J^T J)^-1), and B_i D_i^-1. Each D_i is invertible: a window's start
+    sets its first simulated sample."""
+    bd = b @ np.linalg.inv(d)
+    return a - np.einsum("kij,klj->il", bd, b), bd
+
+
+def lm_step(
+    blocks: tuple[np.ndarray, np.ndarray, np.ndarray], g_params: np.ndarray, g_starts: np.ndarray, damping: float
+) -> np.ndarray:
+    """The Levenberg-Marquardt step (J^T J + damping diag(J^T J)) delta = -J^T r, solved in blocks: for
+    the parameters (S delta_p = -g_p + sum_i B_i D_i^-1 g_i, S of the damped blocks), then each window's start,
+    delta_i = -D_i^-1 (g_i + B_i^T delta_p); g = J^T r split the same way."""
+    a, b, d = blocks
+    a = a + damping * np.diag(np.diag(a) + 1e-12)
+    d = d + damping * np.eye(2) * (np.diagonal(d, axis1=1, axis2=2)[:, None, :] + 1e-12)
+    s, bd = schur(a, b, d)
+    delta = np.linalg.solve(s, -g_params + np.einsum("kij,kj->i", bd, g_starts))
+    starts = -np.linalg.solve(d, (g_starts + np.einsum("kji,j->ki", b, delta))[..., None])[..., 0]
+    return np.concatenate([delta, starts.ravel()])
+
+
+class OutputError(NamedTuple):
+    """An output-error fit of one delay and reading."""
+
+    params: np.ndarray  #: (p,)
+    std: np.ndarray  #: (p,) their standard errors
+    cost: float  #: each channel's mean squared residual over its signal's variance, summed: comparable between fits
+    noise: np.ndarray  #: (2,) each channel's residual spread
+    windows: int  #: windows fitted, each with its own two start speeds
 
 
 def output_error(
@@ -205,46 +294,61 @@ def output_error(
     start: np.ndarray,
     *,
     interval_mean: bool,
+    window: float = WINDOW,
     iterations: int = 40,
-) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """Levenberg-Marquardt on (params, initial speeds) from ``start``; returns the parameters, their standard
-    errors, the cost (each channel's mean squared residual over its signal's variance, summed: comparable between
-    fits) and each channel's residual spread."""
-    data = (jnp.asarray(np.diff(t)), jnp.asarray(inputs[:-1]), jnp.asarray(speed))
-    residual_fn = lambda p, w: np.asarray(_residuals(p, model.rate, *data, w, interval_mean))  # noqa: E731
-    jacobian = lambda p, w: np.asarray(_jacobian(p, model.rate, *data, w, interval_mean))  # noqa: E731
+) -> OutputError:
+    """Levenberg-Marquardt from ``start`` on the model's parameters and, per window of ``window`` [s], the window's
+    initial speeds (multiple shooting: no continuity between windows; each window starts from its measured first
+    sample). The residuals of all windows are stacked; the standard errors are the parameters' block of the
+    Gauss-Newton covariance s^2 (J^T J)^-1, s^2 = |r|^2 / (residuals - p - 2 k), the k windows' starts counted."""
+    windows = cut(t, inputs, speed, window)
+    data = tuple(jnp.asarray(a) for a in windows)
+    count, n_params = len(windows.mask), start.size
+
+    def residual_fn(q: np.ndarray, w: jax.Array) -> np.ndarray:  # q = (params, each window's start v and omega)
+        return np.asarray(
+            _residuals(model.rate, interval_mean, q[:n_params], q[n_params:].reshape(count, 2), data, w)
+        ).ravel()
+
+    def jacobian_fn(q: np.ndarray, w: jax.Array) -> tuple[np.ndarray, np.ndarray]:
+        j = _jacobians(model.rate, interval_mean, q[:n_params], q[n_params:].reshape(count, 2), data, w)
+        return np.asarray(j[0]), np.asarray(j[1])
+
     positive = list(model.positive)
-    p = np.concatenate([start, speed[0]])
-    p[positive] = np.maximum(p[positive], 1e-3 * np.maximum(np.abs(p[positive]).max(), 1e-6))
+    q = np.concatenate([start, windows.speed[:, 0].ravel()])
+    q[positive] = np.maximum(q[positive], 1e-3 * np.maximum(np.abs(q[positive]).max(), 1e-6))
     spread = np.maximum(np.std(speed, axis=0) * 0.01, 1e-6)  # first weights; re-estimated from the residuals
-    if not np.all(np.isfinite(residual_fn(p, jnp.asarray(spread)))):  # noisy coupling terms can make it blow up
-        p[list(model.couplings)] = 0.0
-    if not np.all(np.isfinite(residual_fn(p, jnp.asarray(spread)))):
-        return p[:-2], np.full(p.size - 2, np.inf), np.inf, np.full(2, np.inf)  # no fit from here: another delay wins
+    if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # noisy coupling terms can make it blow up
+        q[list(model.couplings)] = 0.0
+    if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # no fit from here: another delay wins
+        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count)
+    logged = windows.mask.ravel() > 0
     for _ in range(2):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
-        damping, r = 1e-3, residual_fn(p, weights)
+        damping, r = 1e-3, residual_fn(q, weights)
         for _ in range(iterations):
-            j = jacobian(p, weights)
-            normal = j.T @ j
-            trial = p + np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), -(j.T @ r))
+            j_params, j_starts = jacobian_fn(q, weights)
+            rows = r.reshape(count, -1)
+            gradient = np.einsum("kri,kr->i", j_params, rows), np.einsum("kri,kr->ki", j_starts, rows)
+            trial = q + lm_step(normal_blocks(j_params, j_starts), *gradient, damping)
             if np.all(trial[positive] > 0):
                 r_trial = residual_fn(trial, weights)
                 if np.all(np.abs(r_trial) < 1e150) and r_trial @ r_trial < r @ r:  # a diverged trial is no step
                     shrink = (r @ r - r_trial @ r_trial) / max(r @ r, 1e-300)
-                    p, r, damping = trial, r_trial, max(damping / 3.0, 1e-9)
+                    q, r, damping = trial, r_trial, max(damping / 3.0, 1e-9)
                     if shrink < 1e-12:
                         break
                     continue
             damping *= 4.0
             if damping > 1e9:
                 break
-        spread = np.maximum(np.std(r.reshape(-1, 2) * np.asarray(weights), axis=0), 1e-9)
-    j, r = jacobian(p, jnp.asarray(spread)), residual_fn(p, jnp.asarray(spread))
-    covariance = np.linalg.pinv(j.T @ j) * float(r @ r) / max(r.size - p.size, 1)
-    std = np.sqrt(np.clip(np.diag(covariance)[:-2], 0.0, None))
+        spread = np.maximum(np.std((r.reshape(-1, 2) * np.asarray(weights))[logged], axis=0), 1e-9)
+    r = residual_fn(q, jnp.asarray(spread))
+    s, _ = schur(*normal_blocks(*jacobian_fn(q, jnp.asarray(spread))))
+    dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
+    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(s)), 0.0, None) * float(r @ r) / max(dof, 1))
     cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
-    return p[:-2], std, cost, spread
+    return OutputError(q[:n_params], std, cost, spread, count)
 
 
 def unseparated(model: SpeedModel, params: np.ndarray, std: np.ndarray) -> tuple[str, ...]:

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.lag import LagPlant
-from .fit import SpeedFit, SpeedLog, SpeedModel, identify, simulate
+from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify, simulate
 
 
 def _rate(theta, speed, command):
@@ -47,10 +47,10 @@ LAG = SpeedModel(
 )
 
 
-def identify_lag(log: SpeedLog, *, max_delay: float = 0.3) -> SpeedFit:
+def identify_lag(log: SpeedLog, *, max_delay: float = 0.3, window: float = WINDOW) -> SpeedFit:
     """The lag model (theta_1..theta_6) and command delay of the base that recorded ``log`` (its commands as
-    ``log.command``)."""
-    return identify(LAG, log, max_delay=max_delay)
+    ``log.command``), the output error over windows of ``window`` [s]."""
+    return identify(LAG, log, max_delay=max_delay, window=window)
 
 
 def lag_time_constants(theta: np.ndarray) -> tuple[float, float]:
