@@ -161,7 +161,7 @@ def test_plant_motor_overrides_the_preset_and_is_checked(tmp_path):
 
 
 def test_identify_motor_refuses_what_it_cannot_use_and_writes_nothing(tmp_path, cli):
-    truth = robot(wheel_inertia=0.0)
+    truth = robot(wheel_inertia=BURGER_WHEEL_INERTIA)
     log = motor_log(truth, MOTOR, *PLAN)
     write_log(tmp_path / "log.csv", log)
     out = tmp_path / "motor.toml"

@@ -29,7 +29,11 @@ from ..errors import ConfigError
 from ..integrators import rk4_step
 
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
-SUBSTEPS = 4  #: RK4 steps per sample interval of the simulation (a lag of 5 samples is integrated to 1e-6)
+SUBSTEPS = 4  #: RK4 steps per sample interval at least (a lag of 5 samples is integrated to 1e-6)
+MAX_SUBSTEPS = 64
+#: the largest |rate Jacobian eigenvalue| x RK4 step allowed: Coulomb friction's tanh corner is stiff at rest (a
+#: small robot's 1/eps_f slope reaches 1600 1/s), and beyond RK4's stability the tangents of jacfwd blow up
+STIFF_STEP = 0.5
 MIN_SAMPLES = 80
 #: [s] output-error window: 7 of the slowest lag we fit (0.3 s), so most of it answers commands, not its free start
 WINDOW = 2.0
@@ -79,6 +83,7 @@ class SpeedFit:
     fit_percent: dict[str, float]  #: 100 (1 - |y - y_hat| / |y - mean y|) per speed, on the held-out quarter
     samples: tuple[int, int]  #: samples fitted, held out
     windows: int  #: output-error windows the fitted samples were cut into, each simulated from its own start
+    substeps: int = SUBSTEPS  #: RK4 steps per sample interval of the model's simulation (more where it is stiff)
     notes: tuple[str, ...] = field(default=())  #: what this log could not separate
 
 
@@ -98,12 +103,24 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
         delayed = delayed_inputs(inputs, k)[fitted]
         start = equation_error(model, t[fitted], delayed, speed[fitted])
         for mean in (False, True):
-            fits[k, mean] = output_error(
-                model, t[fitted], delayed, speed[fitted], start, interval_mean=mean, window=window
-            )
+            substeps = substeps_for(model, start, speed, float(dt.max()))
+            fit = output_error(model, t[fitted], delayed, speed[fitted], start, interval_mean=mean, window=window,
+                               substeps=substeps)  # fmt: skip
+            stiffer = substeps_for(model, fit.params, speed, float(dt.max())) if np.isfinite(fit.cost) else substeps
+            if stiffer > substeps:  # the fit went where the start's steps are too long: again, from there
+                fit = output_error(model, t[fitted], delayed, speed[fitted], fit.params, interval_mean=mean,
+                                   window=window, substeps=stiffer)  # fmt: skip
+            fits[k, mean] = fit
     k, mean = min(fits, key=lambda key: fits[key].cost)
-    params, std, _, noise, windows = fits[k, mean]
-    predicted = simulate(model, params, t[n_fit - 1 :], delayed_inputs(inputs, k)[n_fit - 1 :], speed[n_fit - 1], mean)
+    if not np.isfinite(fits[k, mean].cost):
+        raise ConfigError(
+            "LOG",
+            f"{log.source}: the {model.name} model's simulation diverges from every start tried",
+            "check the log's units and columns, and that --model is the robot's",
+        )
+    params, std, _, noise, windows, substeps = fits[k, mean]
+    held_inputs = delayed_inputs(inputs, k)[n_fit - 1 :]
+    predicted = simulate(model, params, t[n_fit - 1 :], held_inputs, speed[n_fit - 1], mean, substeps)
     held = speed[n_fit:]
     fit_percent = {
         name: float(
@@ -122,6 +139,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
         fit_percent=fit_percent,
         samples=(n_fit, len(t) - n_fit),
         windows=windows,
+        substeps=substeps,
         notes=unseparated(model, params, std),
     )
 
@@ -172,26 +190,48 @@ def equation_error(model: SpeedModel, t: np.ndarray, inputs: np.ndarray, speed: 
 
 
 def simulate(
-    model: SpeedModel, params: np.ndarray, t: np.ndarray, inputs: np.ndarray, start: np.ndarray, interval_mean: bool
+    model: SpeedModel,
+    params: np.ndarray,
+    t: np.ndarray,
+    inputs: np.ndarray,
+    start: np.ndarray,
+    interval_mean: bool,
+    substeps: int = SUBSTEPS,
 ) -> np.ndarray:
-    """(v, omega) at each of the times ``t`` [s] from ``start`` at t[0], each input held until the next time;
-    with ``interval_mean``, each sample after the first is the mean over the interval ending at it."""
+    """(v, omega) at each of the times ``t`` [s] from ``start`` at t[0], each input held until the next time, by
+    ``substeps`` RK4 steps per interval; with ``interval_mean``, each sample after the first is the mean over the
+    interval ending at it."""
     args = (jnp.asarray(params), jnp.asarray(np.diff(t)), jnp.asarray(inputs[:-1]), jnp.asarray(start))
-    return np.asarray(_simulate(model.rate, *args, interval_mean))
+    return np.asarray(_simulate(model.rate, *args, interval_mean, substeps))
 
 
-@partial(jax.jit, static_argnums=(0, 5))
-def _simulate(rate, params, dt, inputs, start, interval_mean):
+def substeps_for(model: SpeedModel, params: np.ndarray, speed: np.ndarray, step: float) -> int:
+    """RK4 steps per sample interval of ``step`` [s] that keep |lambda| h <= STIFF_STEP for the model at
+    ``params``, lambda the eigenvalues of d rate / d speed at rest and at up to 64 of the logged ``speed``s; at
+    least SUBSTEPS, at most MAX_SUBSTEPS."""
+    points = np.concatenate([np.zeros((1, 2)), speed[:: max(1, len(speed) // 64)]])
+    jacobians = _speed_jacobians(model.rate, jnp.asarray(params), jnp.asarray(points))
+    stiffness = float(np.nan_to_num(np.abs(np.linalg.eigvals(np.asarray(jacobians))).max(), nan=np.inf))
+    return int(np.clip(np.ceil(stiffness * step / STIFF_STEP), SUBSTEPS, MAX_SUBSTEPS))
+
+
+@partial(jax.jit, static_argnums=0)
+def _speed_jacobians(rate, params, points):
+    return jax.vmap(jax.jacfwd(lambda s: rate(params, s, jnp.zeros(2))))(points)
+
+
+@partial(jax.jit, static_argnums=(0, 5, 6))
+def _simulate(rate, params, dt, inputs, start, interval_mean, substeps):
     def interval(speed, step_inputs):
         h, u = step_inputs
         f = lambda s: rate(params, s, u)  # noqa: E731
 
         def substep(s, _):
-            after = rk4_step(f, s, h / SUBSTEPS)
+            after = rk4_step(f, s, h / substeps)
             return after, after
 
-        after, path = jax.lax.scan(substep, speed, None, length=SUBSTEPS)
-        mean = (0.5 * speed + path[:-1].sum(axis=0) + 0.5 * after) / SUBSTEPS  # trapezoid over the substeps
+        after, path = jax.lax.scan(substep, speed, None, length=substeps)
+        mean = (0.5 * speed + path[:-1].sum(axis=0) + 0.5 * after) / substeps  # trapezoid over the substeps
         return after, mean if interval_mean else after
 
     _, speeds = jax.lax.scan(interval, start, (dt, inputs))
@@ -221,26 +261,27 @@ def cut(t: np.ndarray, inputs: np.ndarray, speed: np.ndarray, window: float) -> 
     return Windows(step, held, measured, (np.arange(k * m) < n).astype(float).reshape(k, m))
 
 
-def _window_residuals(rate, interval_mean, params, weights, start, step, inputs, measured, mask):
+def _window_residuals(rate, interval_mean, substeps, params, weights, start, step, inputs, measured, mask):
     """One window simulated from its own start, minus the measured speeds, over each channel's spread: (2 m,), zero
     on padding (a padded interval has zero length, so the simulation just holds its state there)."""
-    simulated = _simulate(rate, params, step, inputs, start, interval_mean)
+    simulated = _simulate(rate, params, step, inputs, start, interval_mean, substeps)
     return ((simulated - measured) / weights * mask[:, None]).ravel()
 
 
-@partial(jax.jit, static_argnums=(0, 1))
-def _residuals(rate, interval_mean, params, starts, windows, weights):
+@partial(jax.jit, static_argnums=(0, 1, 2))
+def _residuals(rate, interval_mean, substeps, params, starts, windows, weights):
     """Every window's residuals, (k, 2 m), the windows simulated side by side."""
-    return jax.vmap(lambda s, *w: _window_residuals(rate, interval_mean, params, weights, s, *w))(starts, *windows)
+    residuals = lambda s, *w: _window_residuals(rate, interval_mean, substeps, params, weights, s, *w)  # noqa: E731
+    return jax.vmap(residuals)(starts, *windows)
 
 
-@partial(jax.jit, static_argnums=(0, 1))
-def _jacobians(rate, interval_mean, params, starts, windows, weights):
+@partial(jax.jit, static_argnums=(0, 1, 2))
+def _jacobians(rate, interval_mean, substeps, params, starts, windows, weights):
     """Each window's exact Jacobian (forward mode through its simulation) on the model's parameters, (k, 2 m, p),
     and on its own start, (k, 2 m, 2): a window's residuals depend on no other window's start."""
 
     def one(start, *window):
-        f = lambda p, s: _window_residuals(rate, interval_mean, p, weights, s, *window)  # noqa: E731
+        f = lambda p, s: _window_residuals(rate, interval_mean, substeps, p, weights, s, *window)  # noqa: E731
         return jax.jacfwd(f, argnums=(0, 1))(params, start)
 
     return jax.vmap(one)(starts, *windows)
@@ -284,6 +325,7 @@ class OutputError(NamedTuple):
     cost: float  #: each channel's mean squared residual over its signal's variance, summed: comparable between fits
     noise: np.ndarray  #: (2,) each channel's residual spread
     windows: int  #: windows fitted, each with its own two start speeds
+    substeps: int  #: RK4 steps per sample interval
 
 
 def output_error(
@@ -295,6 +337,7 @@ def output_error(
     *,
     interval_mean: bool,
     window: float = WINDOW,
+    substeps: int = SUBSTEPS,
     iterations: int = 40,
 ) -> OutputError:
     """Levenberg-Marquardt from ``start`` on the model's parameters and, per window of ``window`` [s], the window's
@@ -307,11 +350,11 @@ def output_error(
 
     def residual_fn(q: np.ndarray, w: jax.Array) -> np.ndarray:  # q = (params, each window's start v and omega)
         return np.asarray(
-            _residuals(model.rate, interval_mean, q[:n_params], q[n_params:].reshape(count, 2), data, w)
+            _residuals(model.rate, interval_mean, substeps, q[:n_params], q[n_params:].reshape(count, 2), data, w)
         ).ravel()
 
     def jacobian_fn(q: np.ndarray, w: jax.Array) -> tuple[np.ndarray, np.ndarray]:
-        j = _jacobians(model.rate, interval_mean, q[:n_params], q[n_params:].reshape(count, 2), data, w)
+        j = _jacobians(model.rate, interval_mean, substeps, q[:n_params], q[n_params:].reshape(count, 2), data, w)
         return np.asarray(j[0]), np.asarray(j[1])
 
     positive = list(model.positive)
@@ -321,13 +364,15 @@ def output_error(
     if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # noisy coupling terms can make it blow up
         q[list(model.couplings)] = 0.0
     if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # no fit from here: another delay wins
-        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count)
+        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
     logged = windows.mask.ravel() > 0
     for _ in range(2):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
         damping, r = 1e-3, residual_fn(q, weights)
         for _ in range(iterations):
             j_params, j_starts = jacobian_fn(q, weights)
+            if not (np.all(np.isfinite(j_params)) and np.all(np.isfinite(j_starts))):
+                break  # the tangents blew up (a stiff model beyond MAX_SUBSTEPS): no step from here
             rows = r.reshape(count, -1)
             gradient = np.einsum("kri,kr->i", j_params, rows), np.einsum("kri,kr->ki", j_starts, rows)
             trial = q + lm_step(normal_blocks(j_params, j_starts), *gradient, damping)
@@ -344,11 +389,14 @@ def output_error(
                 break
         spread = np.maximum(np.std((r.reshape(-1, 2) * np.asarray(weights))[logged], axis=0), 1e-9)
     r = residual_fn(q, jnp.asarray(spread))
-    s, _ = schur(*normal_blocks(*jacobian_fn(q, jnp.asarray(spread))))
+    jacobians = jacobian_fn(q, jnp.asarray(spread))
+    cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
+    if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):
+        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
+    s, _ = schur(*normal_blocks(*jacobians))
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     std = np.sqrt(np.clip(np.diag(np.linalg.pinv(s)), 0.0, None) * float(r @ r) / max(dof, 1))
-    cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
-    return OutputError(q[:n_params], std, cost, spread, count)
+    return OutputError(q[:n_params], std, cost, spread, count, substeps)
 
 
 def unseparated(model: SpeedModel, params: np.ndarray, std: np.ndarray) -> tuple[str, ...]:

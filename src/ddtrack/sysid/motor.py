@@ -116,7 +116,7 @@ def identify_motor(
     t = np.asarray(log.speeds.t, dtype=float)
     voltage = delayed_inputs(np.asarray(log.speeds.command, dtype=float), round(drive.delay / np.median(np.diff(t))))
     measured = np.asarray(log.speeds.speed, dtype=float)
-    predicted = simulate(model, drive.params, t, voltage, measured[0], False)
+    predicted = simulate(model, drive.params, t, voltage, measured[0], False, drive.substeps)
     wheels = [
         np.column_stack(wheel_speeds(s[:, 0], s[:, 1], wheel_radius=wheel_radius, half_axle=half_axle))
         for s in (measured, predicted)
