@@ -7,7 +7,7 @@ from .excitation import Plan, excitation_plan
 from .fit import SpeedFit, SpeedLog, SpeedModel, identify
 from .lag import LAG, identify_lag, lag_time_constants, simulate_speeds
 from .logs import read_motor_log, read_speed_log
-from .motor import ArmatureFit, MotorFit, MotorLog, identify_motor, motor_model, plant_fragment
+from .motor import ArmatureFit, MotorFit, MotorLog, drive_constants, identify_motor, motor_model, plant_fragment
 from .synthetic import body_log, lag_log, motor_log, reversing_steps, torque_plan
 
 __all__ = [
@@ -21,6 +21,7 @@ __all__ = [
     "SpeedModel",
     "body_log",
     "body_model",
+    "drive_constants",
     "excitation_plan",
     "identify",
     "identify_body",

@@ -32,7 +32,7 @@ HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well
 SUBSTEPS = 4  #: RK4 steps per sample interval at least (a lag of 5 samples is integrated to 1e-6)
 MAX_SUBSTEPS = 64
 #: the largest |rate Jacobian eigenvalue| x RK4 step allowed: Coulomb friction's tanh corner is stiff at rest (a
-#: small robot's 1/eps_f slope reaches 1600 1/s), and beyond RK4's stability the tangents of jacfwd blow up
+#: small robot's 1/eps_f slope reaches 1600 1/s), and beyond RK4's stability (2.79) the tangents of jacfwd blow up
 STIFF_STEP = 0.5
 MIN_SAMPLES = 80
 #: [s] output-error window: 7 of the slowest lag we fit (0.3 s), so most of it answers commands, not its free start
@@ -207,12 +207,13 @@ def simulate(
 
 def substeps_for(model: SpeedModel, params: np.ndarray, speed: np.ndarray, step: float) -> int:
     """RK4 steps per sample interval of ``step`` [s] that keep |lambda| h <= STIFF_STEP for the model at
-    ``params``, lambda the eigenvalues of d rate / d speed at rest and at up to 64 of the logged ``speed``s; at
-    least SUBSTEPS, at most MAX_SUBSTEPS."""
+    ``params``, lambda the eigenvalues of d rate / d speed at rest and at up to 64 of the logged ``speed``s: a power
+    of two (so that a few compiled simulations serve every fit) from SUBSTEPS to MAX_SUBSTEPS."""
     points = np.concatenate([np.zeros((1, 2)), speed[:: max(1, len(speed) // 64)]])
     jacobians = _speed_jacobians(model.rate, jnp.asarray(params), jnp.asarray(points))
     stiffness = float(np.nan_to_num(np.abs(np.linalg.eigvals(np.asarray(jacobians))).max(), nan=np.inf))
-    return int(np.clip(np.ceil(stiffness * step / STIFF_STEP), SUBSTEPS, MAX_SUBSTEPS))
+    needed = max(stiffness * step / STIFF_STEP, 1.0)
+    return int(np.clip(2 ** np.ceil(np.log2(needed)), SUBSTEPS, MAX_SUBSTEPS))
 
 
 @partial(jax.jit, static_argnums=0)
@@ -375,7 +376,10 @@ def output_error(
                 break  # the tangents blew up (a stiff model beyond MAX_SUBSTEPS): no step from here
             rows = r.reshape(count, -1)
             gradient = np.einsum("kri,kr->i", j_params, rows), np.einsum("kri,kr->ki", j_starts, rows)
-            trial = q + lm_step(normal_blocks(j_params, j_starts), *gradient, damping)
+            try:
+                trial = q + lm_step(normal_blocks(j_params, j_starts), *gradient, damping)
+            except np.linalg.LinAlgError:  # a window's start no longer moves its samples: damp more
+                trial = np.full_like(q, np.nan)
             if np.all(trial[positive] > 0):
                 r_trial = residual_fn(trial, weights)
                 if np.all(np.abs(r_trial) < 1e150) and r_trial @ r_trial < r @ r:  # a diverged trial is no step
@@ -393,9 +397,12 @@ def output_error(
     cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
     if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):
         return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
-    s, _ = schur(*normal_blocks(*jacobians))
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
-    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(s)), 0.0, None) * float(r @ r) / max(dof, 1))
+    try:
+        s, _ = schur(*normal_blocks(*jacobians))
+        std = np.sqrt(np.clip(np.diag(np.linalg.pinv(s)), 0.0, None) * float(r @ r) / max(dof, 1))
+    except np.linalg.LinAlgError:
+        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
     return OutputError(q[:n_params], std, cost, spread, count, substeps)
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..model.motors import DCMotor
+from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
 from .body import body_model
 from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, simulate
@@ -122,6 +123,18 @@ def identify_motor(
         for s in (measured, predicted)
     ]
     return MotorFit(drive, armature_fit(voltage, np.asarray(log.current, dtype=float), *wheels))
+
+
+def drive_constants(robot: RobotParams, motor: DCMotor) -> np.ndarray:
+    """(kA_v, kA_md, kA_w, kV, kS) of ``robot`` whose wheels ``motor`` turns: (M_v, m d, M_w, g k_e + b_w, tau_c) / g,
+    g = eta k_t / R_a, the wheels' spin inertia in M_v and M_w (what a log of it should give; a datasheet's
+    prediction)."""
+    gain = float(motor.efficiency * motor.torque_constant / motor.resistance)
+    R, L, m, d = (float(x) for x in (robot.wheel_radius, robot.half_axle, robot.mass, robot.com_offset))
+    spin = 2 * float(robot.wheel_inertia) / R**2
+    inertia_axle = float(robot.inertia) + m * d**2 + spin * L**2
+    viscous, coulomb = float(robot.viscous_friction), float(robot.coulomb_friction)
+    return np.array([m + spin, m * d, inertia_axle, gain * float(motor.back_emf) + viscous, coulomb]) / gain
 
 
 def time_constants(params: np.ndarray, *, wheel_radius: float, half_axle: float) -> tuple[float, float]:
