@@ -4,6 +4,7 @@ scenario runs with ``[plant.motor]``, the voltages the motor plants log, and bad
 
 from __future__ import annotations
 
+import json
 import tomllib
 
 import numpy as np
@@ -110,6 +111,8 @@ def test_identify_motor_writes_the_motor_and_robot_a_scenario_runs(tmp_path, cli
     assert float(built.resistance) == pytest.approx(8.5, rel=1e-3)
     assert float(built.supply_voltage) == 11.1  # not identified: the preset's stays
     assert cli("run", scenario, "--out", tmp_path / "run")[0] == 0
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["motor_no_load_speed"] == pytest.approx(11.1 / motor["back_emf"], rel=1e-12)  # the run's motor
 
 
 def test_the_motor_plants_log_the_voltage_their_driver_applies(tmp_path, cli):

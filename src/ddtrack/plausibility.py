@@ -75,14 +75,6 @@ def motor_metrics(motor: DCMotor, columns: dict, control_period: float) -> dict[
     }
 
 
-def preset_motor(scenario: Any) -> DCMotor | None:
-    """The scenario's motor as a :class:`DCMotor` (its ``[robot] preset``'s datasheet with ``[plant.motor]`` over
-    it), or None (the paper's robot has no datasheet motor)."""
-    from .scenario.motor_configs import motor_or_none
-
-    return motor_or_none(scenario)
-
-
 def traction_warnings(scenario: Any, metrics: dict) -> list[dict]:
     """Say when no floor, or not the scenario's (``plant.floor_friction``), could give the grip the run needed."""
     needed, floor = metrics.get("mu_required_max"), scenario.plant.floor_friction

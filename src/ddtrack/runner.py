@@ -27,8 +27,9 @@ from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
-from .plausibility import motor_metrics, motor_warnings, preset_motor, traction_columns, traction_warnings
+from .plausibility import motor_metrics, motor_warnings, traction_columns, traction_warnings
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
+from .scenario.motor_configs import motor_or_none
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .trajectories import Trajectory
 
@@ -332,7 +333,7 @@ def run_metrics(
         failure_time=failure_time,
         floor_friction=scenario.plant.floor_friction,
     )
-    motor = preset_motor(scenario) if status == "ok" else None
+    motor = motor_or_none(scenario) if status == "ok" else None  # the preset's datasheet, [plant.motor] over it
     if motor is not None:  # a preset's datasheet motor: what the run asked of it, before the warnings
         metrics = {key: value for key, value in metrics.items() if key != "warnings"}
         metrics |= motor_metrics(motor, columns, sim.control_period)
