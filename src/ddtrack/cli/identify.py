@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from ..sysid import SpeedFit, SpeedModel
 
 
-@cli.command(short_help="Write a plan of timed cmd_vel commands that makes a robot's log identify it.")
+@cli.command(short_help="Write a plan of timed cmd_vel commands (or voltages) that makes a robot's log identify it.")
 @click.option("--preset", metavar="NAME", help="Take the top speed and yaw rate of this robot (`ddtrack list robots`).")
 @click.option("--max-speed", type=click.FloatRange(min=0.0, min_open=True), metavar="V", help="Top speed [m/s].")
 @click.option(
@@ -300,10 +300,10 @@ def _identify_motor(
         f"#   time constants {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); voltage delay {fit.drive.delay:.3g} s"
     )
     step = float(np.median(np.diff(motor_log.speeds.t)))
-    if min(lag_v, lag_w) < 2 * step:
+    if min(lag_v, lag_w) < step:
         notes.append(
-            f"a time constant is shorter than two samples ({step:.3g} s): the log barely resolves it, so kA_v and "
-            "kA_w are rough; log at a higher rate"
+            f"a time constant is shorter than a sample ({step:.3g} s): the log barely resolves it, so kA_v and kA_w "
+            "are rough; log at a higher rate"
         )
     lines += _held_out_lines(fit.drive)
     lines += [f"#   note: {note}" for note in notes]
