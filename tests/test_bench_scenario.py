@@ -17,7 +17,7 @@ import pytest
 from ddtrack.cli import main
 from ddtrack.metrics import pooled_improvement
 from ddtrack.robots import PRESETS
-from ddtrack.scenario_suite import bench_entries, plan_entries
+from ddtrack.scenario_suite import bench_entries, board_markdown, plan_entries
 
 SCENARIO = """name = "{name}"
 description = "{name} gains"
@@ -110,6 +110,13 @@ def test_two_files_and_an_added_controller_make_one_board_from_the_runs(finished
     assert "| tuned | backstepping |" in text and "vs default [%]" in text and "seed 2" in text
     assert text in stdout
     assert (out / "entries.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_board_says_when_every_seed_gave_the_same_run(finished):
+    *_, summary, _ = finished
+    assert "draws nothing at random" not in board_markdown(summary["leaderboard"], "default")  # mass and noise drawn
+    same = [e | {"e_tr_mean_by_seed": dict.fromkeys(e["e_tr_mean_by_seed"], 0.01)} for e in summary["leaderboard"]]
+    assert "draws nothing at random" in board_markdown(same, "default")
 
 
 def test_a_rerun_reuses_every_run(finished):
