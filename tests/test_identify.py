@@ -12,8 +12,18 @@ from scipy.signal import lfilter
 from ddtrack.errors import ConfigError
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
 from ddtrack.ros.messages import header, message, planar_pose, twist, typestore
-from ddtrack.sysid import SpeedLog, body_log, excitation_plan, identify_body, identify_lag, lag_log, torque_plan
-from ddtrack.sysid.fit import WINDOW, cut
+from ddtrack.sysid import (
+    SpeedLog,
+    body_log,
+    excitation_plan,
+    identify_body,
+    identify_lag,
+    lag_log,
+    plant_keys,
+    torque_plan,
+)
+from ddtrack.sysid.body import equivalent_robot, plant_std
+from ddtrack.sysid.fit import WINDOW, cut, propagated
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 PLAN = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=60.0, rate=20.0, seed=0)
@@ -175,7 +185,7 @@ BODY = np.array([M + 2 * J_W / RADIUS**2, M * D, I_C + M * D**2 + 2 * J_W * HALF
 
 def test_the_body_model_is_recovered_within_its_reported_uncertainty():
     t, torque = torque_plan(max_torque=1.5, duration=16.0, rate=50.0, seed=0)
-    z = []
+    z, z_keys, equivalent = [], [], equivalent_robot(BODY)
     for seed in SEEDS:
         log = body_log(
             BODY, t, torque, wheel_radius=RADIUS, half_axle=HALF, noise=(0.002, 0.005), delay=0.02, seed=seed
@@ -183,8 +193,19 @@ def test_the_body_model_is_recovered_within_its_reported_uncertainty():
         fit = identify_body(log, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.02)
         assert fit.delay == pytest.approx(0.02) and not fit.interval_mean
         z.append((fit.params - BODY) / fit.std)
+        keys, std = plant_keys(fit), plant_std(fit)  # the fragment's keys, their errors by the delta method
+        z_keys.append([(keys[k] - equivalent[k]) / std[k] for k in ("inertia", "com_offset")])
     covered = np.abs(np.array(z)) <= 1.96
     assert covered.mean() >= 0.85 and np.all(np.abs(np.array(z)) < 5), np.round(np.array(z), 2)  # 100 intervals
+    assert (np.abs(np.array(z_keys)) <= 1.96).mean() >= 0.8, np.round(np.array(z_keys), 2)  # 40 intervals
+
+
+def test_the_delta_method_gives_a_ratios_error():
+    """var(a / b) = (sigma_a / b)^2 + (a sigma_b / b^2)^2 - 2 a cov_ab / b^3, to first order."""
+    covariance = np.array([[0.04, 0.01], [0.01, 0.09]])
+    std = propagated(lambda x: {"ratio": x[0] / x[1]}, np.array([2.0, 4.0]), covariance)
+    exact = 0.04 / 16 + (2 * 0.3 / 16) ** 2 - 2 * 2 * 0.01 / 64
+    assert std["ratio"] == pytest.approx(np.sqrt(exact), rel=1e-6)
 
 
 def test_windows_keep_the_intervals_more_honest_under_a_slowly_varying_torque_the_model_lacks():

@@ -199,6 +199,7 @@ def identify(
     could not separate, as a [plant] fragment."""
     from ..ros import check_target
     from ..sysid import LAG, body_model, identify_body, identify_lag, lag_time_constants, plant_keys, read_speed_log
+    from ..sysid.body import plant_std
 
     if out is not None:
         if out.suffix.lower() != ".toml":
@@ -225,7 +226,7 @@ def identify(
     if model == "lag":
         lines += ['model = "lag"', "lag = [" + ", ".join(repr(float(value)) for value in fit.params) + "]"]
     else:
-        lines += [f"{key} = {value!r}" for key, value in plant_keys(fit).items()]
+        lines += _keyed(plant_keys(fit), plant_std(fit))
         lines += [f"wheel_radius = {radius!r}", f"half_axle = {half!r}"]
     if fit.delay > 0:
         lines += ["[sensing]", f"actuation_delay = {fit.delay!r}"]
@@ -244,6 +245,14 @@ def _report(lines: list[str], fit: SpeedFit, out: Path | None) -> int:
     if min(fit.fit_percent.values()) < 50:
         click.echo("warning: the model predicts the held-out speeds poorly (fit below 50 %)", err=True)
     return 0
+
+
+def _keyed(values: dict[str, float], std: dict[str, float]) -> list[str]:
+    """TOML lines ``key = value``, with ``# +- 1.96 std (95 %)`` where the value is uncertain."""
+    return [
+        f"{key} = {value!r}" + (f"  # +- {1.96 * std[key]:.2g} (95 %)" if 0.0 < std.get(key, 0.0) else "")
+        for key, value in values.items()
+    ]
 
 
 def _fitted_lines(model: SpeedModel, fit: SpeedFit) -> list[str]:
@@ -274,7 +283,7 @@ def _identify_motor(
 
     from ..model.motor_plants import motor_from_datasheet
     from ..sysid import identify_motor, motor_model, plant_fragment, read_motor_log
-    from ..sysid.motor import time_constants
+    from ..sysid.motor import fragment_std, time_constants
 
     robot = _preset_option(preset) if preset is not None else None
     if mass is None and robot is None:
@@ -307,9 +316,10 @@ def _identify_motor(
         )
     lines += _held_out_lines(fit.drive)
     lines += [f"#   note: {note}" for note in notes]
-    lines += ["[plant]", *(f"{key} = {value!r}" for key, value in plant.items())]
+    std = fragment_std(fit, mass=weighed, preset_motor=preset_motor)
+    lines += ["[plant]", *_keyed(plant, std)]
     lines += [f"wheel_radius = {radius!r}", f"half_axle = {half!r}", "[plant.motor]"]
-    lines += [f"{key} = {value!r}" for key, value in motor.items()]
+    lines += _keyed(motor, {key.removeprefix("motor."): value for key, value in std.items() if "motor." in key})
     if fit.drive.delay > 0:
         lines += ["[sensing]", f"actuation_delay = {fit.drive.delay!r}"]
     return _report(lines, fit.drive, out)

@@ -22,7 +22,7 @@ from jax import Array
 from ..model.dynamics import body_acceleration
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
-from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify
+from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify, propagated
 
 NAMES = ("M_v", "md", "M_w", "viscous_friction", "coulomb_friction")
 
@@ -106,9 +106,10 @@ def identify_body(
     return identify(model, log, max_delay=max_delay, window=window)
 
 
-def plant_keys(fit: SpeedFit) -> dict[str, float]:
-    """The ``[plant]`` keys of the equivalent robot (J_w folded into mass and inertia)."""
-    mass, md, inertia_axle, viscous, coulomb = (float(value) for value in fit.params)
+def equivalent_robot(params: np.ndarray) -> dict[str, float]:
+    """The ``[plant]`` keys of the equivalent robot of body parameters (M_v, m d, M_w, b_w, tau_c): J_w folded into
+    mass and inertia."""
+    mass, md, inertia_axle, viscous, coulomb = (float(value) for value in params)
     return {
         "mass": mass,
         "inertia": inertia_axle - md**2 / mass,
@@ -117,3 +118,13 @@ def plant_keys(fit: SpeedFit) -> dict[str, float]:
         "coulomb_friction": coulomb,
         "wheel_inertia": 0.0,
     }
+
+
+def plant_keys(fit: SpeedFit) -> dict[str, float]:
+    """The ``[plant]`` keys of the equivalent robot (J_w folded into mass and inertia)."""
+    return equivalent_robot(fit.params)
+
+
+def plant_std(fit: SpeedFit) -> dict[str, float]:
+    """The standard error of each of :func:`plant_keys`, from the fit's covariance (the delta method)."""
+    return propagated(equivalent_robot, fit.params, fit.covariance)

@@ -83,6 +83,7 @@ class SpeedFit:
     fit_percent: dict[str, float]  #: 100 (1 - |y - y_hat| / |y - mean y|) per speed, on the held-out quarter
     samples: tuple[int, int]  #: samples fitted, held out
     windows: int  #: output-error windows the fitted samples were cut into, each simulated from its own start
+    covariance: np.ndarray  #: (p, p) of the parameters (the windows' starts eliminated); std is its diagonal's root
     substeps: int = SUBSTEPS  #: RK4 steps per sample interval of the model's simulation (more where it is stiff)
     notes: tuple[str, ...] = field(default=())  #: what this log could not separate
 
@@ -118,7 +119,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
             f"{log.source}: the {model.name} model's simulation diverges from every start tried",
             "check the log's units and columns, and that --model is the robot's",
         )
-    params, std, _, noise, windows, substeps = fits[k, mean]
+    params, std, _, noise, windows, substeps, covariance = fits[k, mean]
     held_inputs = delayed_inputs(inputs, k)[n_fit - 1 :]
     predicted = simulate(model, params, t[n_fit - 1 :], held_inputs, speed[n_fit - 1], mean, substeps)
     held = speed[n_fit:]
@@ -139,6 +140,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
         fit_percent=fit_percent,
         samples=(n_fit, len(t) - n_fit),
         windows=windows,
+        covariance=covariance,
         substeps=substeps,
         notes=unseparated(model, params, std),
     )
@@ -327,6 +329,7 @@ class OutputError(NamedTuple):
     noise: np.ndarray  #: (2,) each channel's residual spread
     windows: int  #: windows fitted, each with its own two start speeds
     substeps: int  #: RK4 steps per sample interval
+    covariance: np.ndarray  #: (p, p) the parameters' block of the Gauss-Newton covariance
 
 
 def output_error(
@@ -365,7 +368,7 @@ def output_error(
     if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # noisy coupling terms can make it blow up
         q[list(model.couplings)] = 0.0
     if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # no fit from here: another delay wins
-        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
+        return _failed(q[:n_params], count, substeps)
     logged = windows.mask.ravel() > 0
     for _ in range(2):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
@@ -396,14 +399,41 @@ def output_error(
     jacobians = jacobian_fn(q, jnp.asarray(spread))
     cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
     if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):
-        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
+        return _failed(q[:n_params], count, substeps)
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     try:
         s, _ = schur(*normal_blocks(*jacobians))
-        std = np.sqrt(np.clip(np.diag(np.linalg.pinv(s)), 0.0, None) * float(r @ r) / max(dof, 1))
+        covariance = np.linalg.pinv(s) * float(r @ r) / max(dof, 1)
     except np.linalg.LinAlgError:
-        return OutputError(q[:n_params], np.full(n_params, np.inf), np.inf, np.full(2, np.inf), count, substeps)
-    return OutputError(q[:n_params], std, cost, spread, count, substeps)
+        return _failed(q[:n_params], count, substeps)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return OutputError(q[:n_params], std, cost, spread, count, substeps, covariance)
+
+
+def _failed(params: np.ndarray, count: int, substeps: int) -> OutputError:
+    """No fit from this start: infinite cost and uncertainty, so another delay or reading wins."""
+    infinite = np.full(params.size, np.inf)
+    return OutputError(params, infinite, np.inf, np.full(2, np.inf), count, substeps, np.diag(infinite))
+
+
+def propagated(
+    mapping: Callable[[np.ndarray], dict[str, float]], values: np.ndarray, covariance: np.ndarray
+) -> dict[str, float]:
+    """Standard errors of each value of ``mapping(values)`` by the delta method: J C J^T with J by central
+    differences (steps of 1e-6 of each value's scale), C the values' ``covariance``."""
+    scale = np.maximum(np.abs(values), np.sqrt(np.abs(np.diag(covariance))))
+    steps = 1e-6 * np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    keys = list(mapping(values))
+    columns = []
+    for i, h in enumerate(steps):
+        up, down = values.copy(), values.copy()
+        up[i] += h
+        down[i] -= h
+        high, low = mapping(up), mapping(down)
+        columns.append([(high[k] - low[k]) / (2 * h) for k in keys])
+    jacobian = np.array(columns).T
+    variance = np.einsum("ki,ij,kj->k", jacobian, covariance, jacobian)
+    return {k: float(np.sqrt(max(v, 0.0))) if np.isfinite(v) else np.inf for k, v in zip(keys, variance, strict=True)}
 
 
 def unseparated(model: SpeedModel, params: np.ndarray, std: np.ndarray) -> tuple[str, ...]:

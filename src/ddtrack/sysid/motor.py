@@ -28,7 +28,7 @@ from ..model.motors import DCMotor
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
 from .body import body_model
-from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, simulate
+from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, propagated, simulate
 
 NAMES = ("kA_v", "kA_md", "kA_w", "kV", "kS")
 
@@ -150,15 +150,47 @@ def plant_fragment(
     """The ``[plant]`` keys of the equivalent robot, its ``[plant.motor]`` keys, and notes on what was folded or
     taken from elsewhere. ``mass`` [kg] anchors the motor gain; ``preset_motor`` gives R_a when no currents were
     logged (a ConfigError names the options when neither is there); ``supply_voltage`` [V] is written if given."""
-    kA_v, kA_md, kA_w, kV, kS = (float(value) for value in fit.drive.params)
+    armature = None if fit.armature is None else (fit.armature.resistance, fit.armature.back_emf)
+    plant, motor, notes = _fragment(fit.drive.params, armature, mass, preset_motor)
+    if supply_voltage is not None:
+        motor["supply_voltage"] = supply_voltage
+    return plant, motor, notes
+
+
+def fragment_std(fit: MotorFit, *, mass: float, preset_motor: DCMotor | None) -> dict[str, float]:
+    """The standard error of each key of :func:`plant_fragment` (``motor.`` before the motor's), by the delta
+    method from the drive's covariance and the armature's standard errors (the two fits taken as independent);
+    the mass is given, the preset's resistance exact."""
+    drive = np.asarray(fit.drive.params, dtype=float)
+    if fit.armature is None:
+        values, covariance = drive, fit.drive.covariance
+    else:
+        values = np.concatenate([drive, [fit.armature.resistance, fit.armature.back_emf]])
+        covariance = np.zeros((values.size, values.size))
+        covariance[: drive.size, : drive.size] = fit.drive.covariance
+        covariance[drive.size :, drive.size :] = np.diag(np.square(fit.armature.std))
+
+    def keys(x: np.ndarray) -> dict[str, float]:
+        armature = None if fit.armature is None else (float(x[drive.size]), float(x[drive.size + 1]))
+        plant, motor, _ = _fragment(x[: drive.size], armature, mass, preset_motor)
+        return plant | {f"motor.{key}": value for key, value in motor.items()}
+
+    return propagated(keys, values, covariance)
+
+
+def _fragment(
+    drive: np.ndarray, armature: tuple[float, float] | None, mass: float, preset_motor: DCMotor | None
+) -> tuple[dict[str, float], dict[str, float], list[str]]:
+    """:func:`plant_fragment` from the drive constants and the armature's (R_a, k_e), or None without currents."""
+    kA_v, kA_md, kA_w, kV, kS = (float(value) for value in drive)
     gain = mass / kA_v  # g = eta k_t / R_a [N m/V]
     md, inertia_axle = gain * kA_md, gain * kA_w
     notes = [
         f"the motor gain eta k_t / R_a = {gain:.4g} N m/V comes from the mass {mass:g} kg: the wheels' spin inertia "
         "is folded into the robot's mass and inertia, and gearbox efficiency into k_t (efficiency = 1)"
     ]
-    if fit.armature is not None:
-        resistance, back_emf = fit.armature.resistance, fit.armature.back_emf
+    if armature is not None:
+        resistance, back_emf = armature
         viscous = gain * (kV - back_emf)
         if viscous < 0.0:
             notes.append(f"kV is below the currents' k_e by {back_emf - kV:.2g} V s/rad: viscous friction set to 0")
@@ -184,6 +216,4 @@ def plant_fragment(
         "wheel_inertia": 0.0,
     }
     motor = {"resistance": resistance, "torque_constant": gain * resistance, "back_emf": back_emf, "efficiency": 1.0}
-    if supply_voltage is not None:
-        motor["supply_voltage"] = supply_voltage
     return plant, motor, notes
