@@ -249,9 +249,15 @@ def test_ddtrack_identifies_its_own_torque_plant_from_a_bag_of_a_closed_loop_run
     assert code == 0 and "spin inertia is folded into mass and inertia" in printed
     import tomllib
 
-    plant = tomllib.loads(out.read_text())["plant"]
     truth = {"mass": M, "com_offset": D, "inertia": I_C, "viscous_friction": 0.005, "coulomb_friction": 0.05}
-    for key, value in truth.items():
-        assert plant[key] == pytest.approx(value, rel=1e-3), key
+    words = ("identify", tmp_path / "run.mcap", "--model", "body", "--preset", "paper", "--max-delay", "0")
+    joints = tmp_path / "joints.toml"  # the speeds measured by the wheel joints instead of the odometry
+    assert cli(*words, "--speeds", "joints", "--out", joints)[0] == 0
+    for fragment in (out, joints):
+        plant = tomllib.loads(fragment.read_text())["plant"]
+        for key, value in truth.items():
+            assert plant[key] == pytest.approx(value, rel=1e-3), (fragment.name, key)
+    code, _, err = cli("identify", tmp_path / "run.mcap", "--speeds", "joints")  # the lag model: no geometry
+    assert code == 2 and "wheel-joint speeds, need the robot's geometry" in err
     code, _, err = cli("identify", tmp_path / "run.mcap", "--model", "body")
     assert code == 2 and "--preset, or --wheel-radius and --half-axle" in err

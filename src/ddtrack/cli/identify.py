@@ -161,6 +161,14 @@ def _top_speeds(preset: str | None, max_speed: float | None, max_yaw_rate: float
 @click.option("--joint-topic", default="/joint_states", show_default=True, help="body: the wheel efforts.")
 @click.option("--odom-topic", default="/odom", show_default=True, help="The measured speeds (Odometry's twist).")
 @click.option(
+    "--speeds",
+    type=click.Choice(["odom", "joints"]),
+    default="odom",
+    show_default=True,
+    help="A bag's measured speeds: odom, the --odom-topic's twist; joints, the wheel speeds of --joint-topic, "
+    "with the wheel radius and half axle (--preset, or --wheel-radius and --half-axle).",
+)
+@click.option(
     "--preset",
     metavar="NAME",
     help="body, motor: take the wheel radius and half axle of this robot (motor: also its mass, supply voltage, "
@@ -185,6 +193,7 @@ def identify(
     cmd_topic: str,
     joint_topic: str,
     odom_topic: str,
+    speeds: str,
     preset: str | None,
     wheel_radius: float | None,
     half_axle: float | None,
@@ -205,11 +214,18 @@ def identify(
         if out.suffix.lower() != ".toml":
             raise ConfigError("--out", f"'{out}' is not a .toml file", "give FILE.toml")
         check_target(out, overwrite=overwrite, option="--out")
-    if model != "lag":
+    if model != "lag" or speeds == "joints":
         radius, half = _geometry(preset, wheel_radius, half_axle)
     if model == "motor":
         return _identify_motor(log, preset, radius, half, mass, max_delay, out)
-    speed_log = read_speed_log(log, model=model, cmd_topic=cmd_topic, odom_topic=odom_topic, joint_topic=joint_topic)
+    speed_log = read_speed_log(
+        log,
+        model=model,
+        cmd_topic=cmd_topic,
+        odom_topic=odom_topic,
+        joint_topic=joint_topic,
+        wheels=(radius, half) if speeds == "joints" else None,
+    )
     if model == "body":
         fit = identify_body(speed_log, wheel_radius=radius, half_axle=half, max_delay=max_delay)
         described = body_model(wheel_radius=radius, half_axle=half)
@@ -334,6 +350,8 @@ def _geometry(preset: str | None, wheel_radius: float | None, half_axle: float |
     if wheel_radius is None or half_axle is None:
         missing = "--wheel-radius" if wheel_radius is None else "--half-axle"
         raise ConfigError(
-            missing, "the body model needs the robot's geometry", "give --preset, or --wheel-radius and --half-axle"
+            missing,
+            "the body and motor models, and wheel-joint speeds, need the robot's geometry",
+            "give --preset, or --wheel-radius and --half-axle",
         )
     return float(wheel_radius), float(half_axle)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -27,68 +28,101 @@ def read_speed_log(
     cmd_topic: str = "/cmd_vel",
     odom_topic: str = "/odom",
     joint_topic: str = "/joint_states",
+    wheels: tuple[float, float] | None = None,
 ) -> SpeedLog:
     """The inputs (the lag model's velocity commands, or the body model's wheel torques) and measured speeds of
     ``path``: a bag (a folder, ``.mcap`` or ``.db3``), ``.csv`` or ``.parquet``; a run folder reads its
-    ``timeseries.parquet``."""
+    ``timeseries.parquet``. A bag's speeds are its odometry's twist, or with ``wheels`` = (wheel radius, half axle)
+    [m], the ones its wheel joints' speeds give (no slip)."""
     if path.is_dir() and (path / "timeseries.parquet").is_file():
         path = path / "timeseries.parquet"
     suffix = path.suffix.lower()
     if suffix in (".csv", ".parquet"):
         return _table_log(path, INPUT_COLUMNS[model])
-    if path.is_dir() or suffix in (".mcap", ".db3"):
+    if not (path.is_dir() or suffix in (".mcap", ".db3")):
+        raise ConfigError("LOG", f"'{path}' is neither a bag nor a .csv or .parquet table", "give one of those")
+    from ..ros.reading import open_bag
+
+    with open_bag(path) as reader:
         if model == "body":
-            return torque_bag_log(path, joint_topic=joint_topic, odom_topic=odom_topic)
-        return bag_log(path, cmd_topic=cmd_topic, odom_topic=odom_topic)
-    raise ConfigError("LOG", f"'{path}' is neither a bag nor a .csv or .parquet table", "give one of those")
+            sent, values = _joint_efforts(reader, joint_topic)
+            inputs = joint_topic
+        else:
+            sent, values = _commands(reader, cmd_topic)
+            inputs = cmd_topic
+        if wheels is None:
+            measured_at, speeds = _odometry(reader, odom_topic)
+            measured = odom_topic
+        else:
+            measured_at, speeds = _wheel_joint_speeds(reader, joint_topic, *wheels)
+            measured = f"{joint_topic} speeds"
+    return _held_inputs(path, sent, values, measured_at, speeds, f"'{path}' ({inputs}, {measured})")
 
 
-def bag_log(path: Path, *, cmd_topic: str, odom_topic: str) -> SpeedLog:
-    """Measured speeds at each odometry stamp, with the velocity command last received at or before it (a base
-    holds cmd_vel until the next one). Samples before the first command are dropped."""
-    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
-
-    with open_bag(path) as reader:
-        commands = topic_messages(reader, cmd_topic, TWIST_TYPES, option="--cmd-topic")
-        odometry = topic_messages(reader, odom_topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
-    sent = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in commands], dtype=np.int64)
-    twists = [msg.twist if hasattr(msg, "header") else msg for _, msg in commands]
-    values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
-    order = np.argsort(sent, kind="stable")  # receive order can differ from stamp order
-    sent, values = sent[order], values[order]
-    return _held_inputs(path, sent, values, odometry, f"'{path}' ({cmd_topic}, {odom_topic})")
-
-
-def torque_bag_log(path: Path, *, joint_topic: str, odom_topic: str) -> SpeedLog:
-    """Measured speeds at each odometry stamp, with the wheel efforts of ``joint_topic`` last published at or
-    before it; the right wheel is the joint whose name says "right" (else the first)."""
-    from ..ros.reading import header_or_bag_time, open_bag, topic_messages
-
-    with open_bag(path) as reader:
-        joints = topic_messages(reader, joint_topic, ("sensor_msgs/msg/JointState",), option="--joint-topic")
-        odometry = topic_messages(reader, odom_topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
-    names = list(joints[0][1].name)
-    if len(joints[0][1].effort) < 2:
-        raise ConfigError("--joint-topic", f"'{joint_topic}' carries no wheel efforts", "record the wheel torques")
-    right = next((i for i, name in enumerate(names) if "right" in name), 0)
-    left = next((i for i, name in enumerate(names) if "left" in name), 1 - right)
-    sent = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in joints], dtype=np.int64)
-    values = np.array([[msg.effort[right], msg.effort[left]] for _, msg in joints], dtype=float)
-    order = np.argsort(sent, kind="stable")
-    return _held_inputs(path, sent[order], values[order], odometry, f"'{path}' ({joint_topic}, {odom_topic})")
-
-
-def _held_inputs(path: Path, sent: np.ndarray, values: np.ndarray, odometry: list, source: str) -> SpeedLog:
-    """At each odometry stamp, its twist's (v, omega) and the input last sent at or before it (held until the
-    next); samples before the first input are dropped."""
+def _stamped(messages: list) -> np.ndarray:
     from ..ros.reading import header_or_bag_time
 
-    measured_at = np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in odometry], dtype=np.int64)
+    return np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in messages], dtype=np.int64)
+
+
+def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] and (v*, omega*) of each velocity command, in stamp order (receive order can differ)."""
+    from ..ros.reading import topic_messages
+
+    commands = topic_messages(reader, topic, TWIST_TYPES, option="--cmd-topic")
+    twists = [msg.twist if hasattr(msg, "header") else msg for _, msg in commands]
+    values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
+    sent = _stamped(commands)
+    order = np.argsort(sent, kind="stable")
+    return sent[order], values[order]
+
+
+def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] and the right and left wheels' ``field`` (effort or velocity) of each JointState, in stamp
+    order; the right wheel is the joint whose name says "right" (else the first)."""
+    from ..ros.reading import topic_messages
+
+    joints = topic_messages(reader, topic, ("sensor_msgs/msg/JointState",), option="--joint-topic")
+    names = list(joints[0][1].name)
+    if len(getattr(joints[0][1], field)) < 2:
+        raise ConfigError("--joint-topic", f"'{topic}' carries no wheel {field}", missing)
+    right = next((i for i, name in enumerate(names) if "right" in name), 0)
+    left = next((i for i, name in enumerate(names) if "left" in name), 1 - right)
+    values = np.array([[getattr(msg, field)[right], getattr(msg, field)[left]] for _, msg in joints], dtype=float)
+    sent = _stamped(joints)
+    order = np.argsort(sent, kind="stable")
+    return sent[order], values[order]
+
+
+def _joint_efforts(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    return _wheel_joints(reader, topic, "effort", "record the wheel torques")
+
+
+def _wheel_joint_speeds(reader: Any, topic: str, radius: float, half: float) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] and (v, omega) of the wheels' speeds: R (phi_R + phi_L) / 2, R (phi_R - phi_L) / (2 L)."""
+    stamps, rates = _wheel_joints(reader, topic, "velocity", "record the wheel speeds, or measure with --speeds odom")
+    v = radius * (rates[:, 0] + rates[:, 1]) / 2
+    return stamps, np.column_stack([v, radius * (rates[:, 0] - rates[:, 1]) / (2 * half)])
+
+
+def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """The stamps [ns] and twist (v, omega) of each Odometry message."""
+    from ..ros.reading import topic_messages
+
+    odometry = topic_messages(reader, topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
     speeds = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for _, m in odometry], dtype=float)
+    return _stamped(odometry), speeds
+
+
+def _held_inputs(
+    path: Path, sent: np.ndarray, values: np.ndarray, measured_at: np.ndarray, speeds: np.ndarray, source: str
+) -> SpeedLog:
+    """At each measurement's stamp, its (v, omega) and the input last sent at or before it (held until the next);
+    samples before the first input are dropped."""
     latest = np.searchsorted(sent, measured_at, side="right") - 1
     valid = latest >= 0
     if valid.sum() == 0:
-        raise ConfigError("LOG", f"'{path}': every odometry message comes before the first input", "")
+        raise ConfigError("LOG", f"'{path}': every measurement comes before the first input", "")
     t = (measured_at[valid] - measured_at[valid][0]) / 1e9
     return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source)
 
