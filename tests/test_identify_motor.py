@@ -15,7 +15,8 @@ from ddtrack.model.motors import DCMotor
 from ddtrack.model.params import RobotParams
 from ddtrack.scenario import load_scenario
 from ddtrack.scenario.motor_configs import scenario_motor
-from ddtrack.sysid import drive_constants, identify_motor, motor_log, reversing_steps
+from ddtrack.sysid import drive_constants, identify_motor, motor_log, motor_model, reversing_steps
+from ddtrack.sysid.fit import unseparated
 
 RADIUS, HALF = 0.033, 0.08
 #: a Burger-sized robot with a 10 % heavier motor than its datasheet's, a lossy gearbox and a little viscous drag
@@ -190,3 +191,9 @@ def test_excite_writes_a_plan_of_voltages(tmp_path, cli):
     assert rows.shape == (1000, 3) and np.abs(rows[:, 1:]).max() <= 6.0 and np.ptp(rows[:, 1] - rows[:, 2]) > 0
     code, _, err = cli("excite", "--volts", 6, "--out", tmp_path / "v.mcap")
     assert code == 2 and "--out" in err and not (tmp_path / "v.mcap").exists()
+
+
+def test_a_parameter_the_log_leaves_open_is_named_with_the_plan_that_pins_it():
+    model = motor_model(wheel_radius=RADIUS, half_axle=HALF)
+    notes = unseparated(model, np.array([38.0, -0.3, 0.2, 1.9, 0.2]), np.array([1.0, 1.0, 0.01, 0.01, 0.01]))
+    assert len(notes) == 1 and notes[0].startswith("kA_md") and "ddtrack excite --volts" in notes[0]

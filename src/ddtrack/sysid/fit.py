@@ -68,6 +68,7 @@ class SpeedModel:
     positive: tuple[int, ...]  #: parameters that must stay > 0 (inertias)
     couplings: tuple[int, ...]  #: parameters set to 0 for a safe start when the equation error's start diverges
     input_names: tuple[str, str]  #: the input's two channels, for messages
+    excitation: str = "drive turns at speed (ddtrack excite)"  #: what a log needs to pin a parameter down
 
 
 @dataclass(frozen=True)
@@ -443,6 +444,6 @@ def unseparated(model: SpeedModel, params: np.ndarray, std: np.ndarray) -> tuple
         if 1.96 * sigma > max(abs(value), 1e-12):
             notes.append(
                 f"{name} ({meaning}) = {value:.3g} +- {1.96 * sigma:.2g} (95 %): not separated from 0 by this log; "
-                "drive turns at speed (ddtrack excite) to pin it down"
+                f"{model.excitation} to pin it down"
             )
     return tuple(notes)

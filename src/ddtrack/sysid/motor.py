@@ -49,6 +49,7 @@ def motor_model(*, wheel_radius: float, half_axle: float, friction_smoothing: fl
             "tau_c / g, Coulomb friction per wheel",
         ),
         input_names=("u_r", "u_l"),
+        excitation="drive voltage steps of both signs, straight and turning (ddtrack excite --volts)",
     )
 
 
