@@ -27,7 +27,7 @@ from ..errors import ConfigError
 from ..model.motors import DCMotor
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
-from .body import body_model
+from .body import body_model, equivalent_robot
 from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, propagated, simulate
 
 NAMES = ("kA_v", "kA_md", "kA_w", "kV", "kS")
@@ -208,13 +208,6 @@ def _fragment(
             "without currents the motor's resistance cannot be told from its torque constant",
             "log the currents (i_r, i_l), or give --preset for its datasheet resistance",
         )
-    plant = {
-        "mass": mass,
-        "inertia": inertia_axle - md**2 / mass,
-        "com_offset": md / mass,
-        "viscous_friction": viscous,
-        "coulomb_friction": gain * kS,
-        "wheel_inertia": 0.0,
-    }
+    plant = equivalent_robot(np.array([mass, md, inertia_axle, viscous, gain * kS]))
     motor = {"resistance": resistance, "torque_constant": gain * resistance, "back_emf": back_emf, "efficiency": 1.0}
     return plant, motor, notes
