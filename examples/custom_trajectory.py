@@ -13,7 +13,6 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 
 import ddtrack
@@ -23,8 +22,7 @@ from ddtrack.trajectories import ParametricCurve
 ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
 
 
-@jax.tree_util.register_dataclass  # a pytree, so changing a field never recompiles the simulator
-@dataclasses.dataclass(frozen=True)
+@ddtrack.pytree_dataclass  # a frozen dataclass and a pytree: changing a field never recompiles the simulator
 class Bernoulli(ParametricCurve):
     """Lemniscate of Bernoulli of half-width ``a`` [m], both lobes in ``period`` [s]; it never stops."""
 

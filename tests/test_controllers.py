@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import ddtrack
-from ddtrack._pytree import pytree_dataclass
+from ddtrack import pytree_dataclass
 from ddtrack.controllers import (
     Backstepping,
     Cascade,

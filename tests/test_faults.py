@@ -22,7 +22,7 @@ from conftest import SCENARIOS
 
 import ddtrack
 import ddtrack.runner
-from ddtrack._pytree import pytree_dataclass
+from ddtrack import pytree_dataclass
 from ddtrack.metrics import summarize
 from ddtrack.sim import REMEDIES
 

@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import ddtrack  # noqa: F401  (turns on float64)
-from ddtrack._pytree import pytree_dataclass
+from ddtrack import pytree_dataclass
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance
 from ddtrack.sim import Draws, rk4, rk4_step, simulate
 from ddtrack.trajectories import Line

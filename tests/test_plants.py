@@ -101,6 +101,25 @@ def test_a_seven_state_plant_runs_in_the_environment():
     assert env._x.shape == (7,) and float(env._x[5]) != 0.0  # the environment carries the plant's whole state
 
 
+def test_two_classes_with_the_same_fields_have_different_structures():
+    """A pytree's class is part of its structure. jaxlib 0.10 compares ``register_dataclass`` nodes by their fields
+    alone, so the 5-state and the 7-state plant (one field, ``params``, each) compared equal, and a jitted function
+    whose two cache entries met in one hash bucket ran the other plant's program: the environment's reference
+    robot once got a 7-state x (about one CI run in three)."""
+    import jax
+
+    params = RobotParams()
+    five, seven = (jax.tree_util.tree_structure(plant) for plant in (DynamicPlant(params), WheelAnglePlant(params)))
+    assert five != seven
+    sensed = ddtrack.model.SensedPlant(DynamicPlant(params), 0.033, 0.08, 0.033, 0.08, odometry=True)
+    assert jax.tree_util.tree_structure(sensed) != jax.tree_util.tree_structure(
+        dataclasses.replace(sensed, odometry=False)
+    )
+    assert jax.tree_util.tree_structure(dataclasses.replace(params, mass=2.0)) == jax.tree_util.tree_structure(params)
+    paths = [jax.tree_util.keystr(path) for path, _ in jax.tree_util.tree_flatten_with_path(sensed)[0]]
+    assert ".inner.params.mass" in paths  # leaves keep their names (errors inside jit name the field)
+
+
 def test_a_controller_the_plant_cannot_take_is_refused_when_assembled():
     setup, _ = prepare(scenario())
     with pytest.raises(ddtrack.ConfigError, match="Backstepping outputs velocity commands but DynamicPlant takes"):

@@ -16,7 +16,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
-from ddtrack._pytree import pytree_dataclass
+from ddtrack import pytree_dataclass
 from ddtrack.errors import ConfigError
 from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds

@@ -33,6 +33,8 @@ def _register_env(gymnasium: ModuleType) -> None:
 _after_import("gymnasium", _register_env)
 
 if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time they load on first use
+    from ._pytree import pytree_dataclass as pytree_dataclass
+    from ._pytree import static_field as static_field
     from .errors import ConfigError as ConfigError
     from .errors import DdtrackError as DdtrackError
     from .errors import RunError as RunError
@@ -79,6 +81,8 @@ _SOURCES = {
     "simulate": "sim",
     "timeseries": "sim",
     "enable_float64": "precision",
+    "pytree_dataclass": "_pytree",
+    "static_field": "_pytree",
 }
 
 __all__ = sorted(_SOURCES)  # noqa: PLE0605 (the lazy-import table above is the one list of public names)

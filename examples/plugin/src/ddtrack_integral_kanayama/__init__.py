@@ -10,7 +10,6 @@ files and every command.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Literal
 
 import jax
@@ -24,8 +23,7 @@ from ddtrack.model import RobotParams
 from ddtrack.scenario import InnerLoopConfig, NonNegative, Positive
 
 
-@jax.tree_util.register_dataclass  # the simulator is jitted: a controller is a pytree of its parameters
-@dataclasses.dataclass(frozen=True)
+@ddtrack.pytree_dataclass  # the simulator is jitted: a controller is a frozen dataclass and a pytree of its parameters
 class IntegralKanayama:
     """Kanayama's law with v_c += ki * integral of e_x. In: y = [x, y, theta, v, omega] and the reference;
     out: (v_c [m/s], omega_c [rad/s]) and its feed-forward derivative (the inner loop's K_c absorbs the rest)."""

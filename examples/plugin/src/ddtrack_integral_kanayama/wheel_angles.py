@@ -14,12 +14,11 @@ import jax.numpy as jnp
 from jax import Array
 
 import ddtrack
-from ddtrack._pytree import pytree_dataclass
 from ddtrack.layout import BODY, WHEEL_TORQUES, Layout, velocity
 from ddtrack.model import DynamicPlant, ODEPlant, RobotParams, wheel_speeds
 
 
-@pytree_dataclass
+@ddtrack.pytree_dataclass
 class WheelAnglePlant(ODEPlant):
     """The Lagrangian robot with its wheel angles (phi_r, phi_l) [rad] as two more states."""
 
