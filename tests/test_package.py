@@ -10,6 +10,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from conftest import ROOT, SCENARIOS
 
 import ddtrack
@@ -130,6 +131,27 @@ def test_swapping_the_controller_keeps_the_random_draws():
     other = ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=[*_short(2), "controller.inner=pd"])
     (_, draws_a), (_, draws_b) = ddtrack.prepare(scenario, seed=1), ddtrack.prepare(other, seed=1)
     assert np.array_equal(draws_a.disturbance, draws_b.disturbance) and np.array_equal(draws_a.noise, draws_b.noise)
+
+
+@pytest.mark.parametrize("seconds", [2, 10.24, 10.25, 41])
+def test_a_run_s_draws_are_its_own_length_s_draws(seconds):
+    """prepare draws a power-of-two length and keeps the run's rows (one program for many lengths): the rows must
+    be the very draws of an array of the run's own length, so that no result depends on the bucket."""
+    import jax
+
+    from ddtrack.runner import drawn_length, streams
+
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "figure_eight.toml",
+        overrides=[f"simulation.duration={seconds}", f"simulation.metric_window=[0, {seconds}]"],
+    )
+    n = scenario.simulation.n_steps
+    assert drawn_length(n) >= n and drawn_length(n) & (drawn_length(n) - 1) == 0
+    _, draws = ddtrack.prepare(scenario, seed=4)
+    keys = streams(4)
+    assert draws.disturbance.shape == (n, 2) and draws.noise.shape == (n, 5)
+    assert np.array_equal(draws.disturbance, np.asarray(jax.random.normal(keys["disturbance"], (n, 2))))
+    assert np.array_equal(draws.noise, np.asarray(jax.random.normal(keys["noise"], (n, 5))))
 
 
 # Every shipped scenario runs and tracks, with every controller: tests/test_golden.py.

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -30,10 +31,16 @@ GYRATION_RANGE = (0.05, 20.0)
 _SAMPLES: dict[tuple, Any] = {}  # the last few scenarios' samples: loading checks them, runs reuse them
 
 
+@cache  # one jitted function: a new one per scenario compiled again each time (its cache is its own)
 def _sampler() -> Callable[..., Any]:  # (trajectory, times) -> Reference; this layer sits below both
     import jax
 
     return jax.jit(lambda trajectory, t: jax.vmap(trajectory)(t))  # one program, kept by the persistent cache
+
+
+def _padded_length(samples: int) -> int:
+    """The next power of two (at least 1024): scenarios of many lengths share one program per trajectory kind."""
+    return max(1024, 1 << (samples - 1).bit_length())
 
 
 def sample_reference(scenario: Any) -> Any:
@@ -45,10 +52,12 @@ def sample_reference(scenario: Any) -> Any:
     key = (scenario.trajectory.model_dump_json(), sim.duration, sim.control_period)
     if key not in _SAMPLES:
         samples = min(MAX_SAMPLES, int(sim.duration / sim.control_period) + 1)
-        reference = _sampler()(scenario.trajectory.build(), np.linspace(0.0, sim.duration, samples))
+        times = np.linspace(0.0, sim.duration, samples)
+        padded = np.concatenate([times, np.full(_padded_length(samples) - samples, sim.duration)])
+        reference = _sampler()(scenario.trajectory.build(), padded)  # each sample is its own time's alone
         if len(_SAMPLES) >= 8:
             _SAMPLES.pop(next(iter(_SAMPLES)))
-        _SAMPLES[key] = jax.tree_util.tree_map(np.asarray, reference)
+        _SAMPLES[key] = jax.tree_util.tree_map(lambda column: np.asarray(column)[:samples], reference)
     return _SAMPLES[key]
 
 

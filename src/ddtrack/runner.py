@@ -82,10 +82,19 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
     return float(value + draw.absolute * r)
 
 
+def drawn_length(n_steps: int) -> int:
+    """How many periods' normal draws :func:`_seed_draws` makes for a run of ``n_steps``: the next power of two,
+    at least 1024, so that runs of many lengths share one compiled program (0.4 s each) instead of one per length.
+    JAX's partitionable Threefry draws element i of an array from the key and i alone, so a run's draws are the
+    first ``n_steps`` rows of the longer array: the same bits as an array of exactly ``n_steps`` rows."""
+    return max(1024, 1 << (n_steps - 1).bit_length())
+
+
 @partial(jax.jit, static_argnames="n_steps")
 def _seed_draws(seed: int, n_steps: int) -> tuple[dict, tuple, Array, Array]:
     """Every key and standard-normal draw of one run as one program: drawn one by one, each is a dispatch of
-    its own, and together they cost an interactive run more than the simulation (same bits either way)."""
+    its own, and together they cost an interactive run more than the simulation (same bits either way).
+    ``n_steps`` is :func:`drawn_length`'s: the caller keeps the run's first rows."""
     keys = streams(seed)
     disturbance = jax.random.normal(keys["disturbance"], (n_steps, len(WHEEL_TORQUES)))
     return (
@@ -136,7 +145,9 @@ def prepare(
         The run's standard-normal draws (disturbance, noise) and the controller's PRNG key.
     """
     seed = scenario.simulation.seed if seed is None else seed
-    keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, scenario.simulation.n_steps)
+    n_steps = scenario.simulation.n_steps
+    keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, drawn_length(n_steps))
+    disturbance, noise = np.asarray(disturbance)[:n_steps], np.asarray(noise)[:n_steps]  # NumPy: no program per length
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
     if setup.sensing is not None and setup.sensing.fix_period:  # the fix's noise: a key of its own off the noise stream
         setup = dataclasses.replace(setup, sensing_key=jax.random.fold_in(keys["noise"], 1))

@@ -17,7 +17,7 @@ from ..precision import require_float64
 from ..trajectories import Trajectory
 from .result import SimResult
 
-SCAN_UNROLL = 4
+SCAN_UNROLL = 2
 
 
 class Draws(NamedTuple):
@@ -255,7 +255,7 @@ def simulate(
 
     steps = jnp.arange(n_steps)
     carry0 = (x0, memory0, jnp.asarray(0), jnp.asarray(-1))
-    # unroll=4: a third less per-step loop overhead on CPU at no compile cost (docs/benchmarks.md)
+    # unroll=2: a third less per-step loop overhead on CPU; 4 ran no faster and compiled a quarter slower (docs/benchmarks.md)
     (_, _, status, failure_index), (states, refs, errors, controls, logs, extra) = jax.lax.scan(
         period, carry0, (steps, draws.disturbance, draws.noise), unroll=SCAN_UNROLL
     )
