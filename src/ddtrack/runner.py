@@ -147,7 +147,8 @@ def prepare(
     seed = scenario.simulation.seed if seed is None else seed
     n_steps = scenario.simulation.n_steps
     keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, drawn_length(n_steps))
-    disturbance, noise = np.asarray(disturbance)[:n_steps], np.asarray(noise)[:n_steps]  # NumPy: no program per length
+    # the run's rows, cut on the host: a slice in JAX would compile a program per length
+    disturbance, noise = (jax.device_put(np.asarray(d)[:n_steps]) for d in (disturbance, noise))
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
     if setup.sensing is not None and setup.sensing.fix_period:  # the fix's noise: a key of its own off the noise stream
         setup = dataclasses.replace(setup, sensing_key=jax.random.fold_in(keys["noise"], 1))

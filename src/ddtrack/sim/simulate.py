@@ -255,7 +255,7 @@ def simulate(
 
     steps = jnp.arange(n_steps)
     carry0 = (x0, memory0, jnp.asarray(0), jnp.asarray(-1))
-    # unroll=2: a third less per-step loop overhead on CPU; 4 ran no faster and compiled a quarter slower (docs/benchmarks.md)
+    # unroll=2: a third less loop overhead on CPU; 4 ran no faster and compiled slower (docs/benchmarks.md)
     (_, _, status, failure_index), (states, refs, errors, controls, logs, extra) = jax.lax.scan(
         period, carry0, (steps, draws.disturbance, draws.noise), unroll=SCAN_UNROLL
     )
