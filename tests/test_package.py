@@ -139,14 +139,15 @@ def test_a_run_s_draws_are_its_own_length_s_draws(seconds):
     be the very draws of an array of the run's own length, so that no result depends on the bucket."""
     import jax
 
-    from ddtrack.runner import drawn_length, streams
+    from ddtrack.compilations import padded_length
+    from ddtrack.runner import streams
 
     scenario = ddtrack.load_scenario(
         SCENARIOS / "figure_eight.toml",
         overrides=[f"simulation.duration={seconds}", f"simulation.metric_window=[0, {seconds}]"],
     )
     n = scenario.simulation.n_steps
-    assert drawn_length(n) >= n and drawn_length(n) & (drawn_length(n) - 1) == 0
+    assert padded_length(n) >= n and padded_length(n) & (padded_length(n) - 1) == 0
     _, draws = ddtrack.prepare(scenario, seed=4)
     keys = streams(4)
     assert draws.disturbance.shape == (n, 2) and draws.noise.shape == (n, 5)

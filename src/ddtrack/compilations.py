@@ -17,6 +17,12 @@ OWN_MAPS_FILE = "/proc/self/maps"
 RELEASE_AT = 0.5  #: the share of the mapping limit at which compiled programs are released
 
 
+def padded_length(n: int) -> int:
+    """The next power of two at least ``n`` (and at least 1024): work done elementwise over ``n`` items is done over
+    this many and cut, so that one compiled program serves inputs of many lengths instead of one program each."""
+    return max(1024, 1 << (n - 1).bit_length())
+
+
 def memory_mappings() -> int | None:
     """How many memory mappings this process holds, or None where the system does not say (not Linux)."""
     try:

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .compilations import padded_length
 from .errors import ConfigError
 from .precision import require_float64
 
@@ -38,11 +39,6 @@ def _sampler() -> Callable[..., Any]:  # (trajectory, times) -> Reference; this 
     return jax.jit(lambda trajectory, t: jax.vmap(trajectory)(t))  # one program, kept by the persistent cache
 
 
-def _padded_length(samples: int) -> int:
-    """The next power of two (at least 1024): scenarios of many lengths share one program per trajectory kind."""
-    return max(1024, 1 << (samples - 1).bit_length())
-
-
 def sample_reference(scenario: Any) -> Any:
     """The scenario's reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
     require_float64()  # loading samples the reference in JAX
@@ -53,7 +49,7 @@ def sample_reference(scenario: Any) -> Any:
     if key not in _SAMPLES:
         samples = min(MAX_SAMPLES, int(sim.duration / sim.control_period) + 1)
         times = np.linspace(0.0, sim.duration, samples)
-        padded = np.concatenate([times, np.full(_padded_length(samples) - samples, sim.duration)])
+        padded = np.concatenate([times, np.full(padded_length(samples) - samples, sim.duration)])
         reference = _sampler()(scenario.trajectory.build(), padded)  # each sample is its own time's alone
         if len(_SAMPLES) >= 8:
             _SAMPLES.pop(next(iter(_SAMPLES)))

@@ -21,6 +21,7 @@ from jax import Array
 
 from . import feasibility
 from .adaptation import adaptation_warnings
+from .compilations import padded_length
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
@@ -82,19 +83,13 @@ def _draw(value: float, draw: ParameterDraw, key: jax.Array) -> float:
     return float(value + draw.absolute * r)
 
 
-def drawn_length(n_steps: int) -> int:
-    """How many periods' normal draws :func:`_seed_draws` makes for a run of ``n_steps``: the next power of two,
-    at least 1024, so that runs of many lengths share one compiled program (0.4 s each) instead of one per length.
-    JAX's partitionable Threefry draws element i of an array from the key and i alone, so a run's draws are the
-    first ``n_steps`` rows of the longer array: the same bits as an array of exactly ``n_steps`` rows."""
-    return max(1024, 1 << (n_steps - 1).bit_length())
-
-
 @partial(jax.jit, static_argnames="n_steps")
 def _seed_draws(seed: int, n_steps: int) -> tuple[dict, tuple, Array, Array]:
     """Every key and standard-normal draw of one run as one program: drawn one by one, each is a dispatch of
     its own, and together they cost an interactive run more than the simulation (same bits either way).
-    ``n_steps`` is :func:`drawn_length`'s: the caller keeps the run's first rows."""
+    ``n_steps`` is padded (:func:`~ddtrack.compilations.padded_length`): one program serves runs of many lengths.
+    JAX's partitionable Threefry draws element i from the key and i alone, so the caller's first rows are the same
+    bits as an array of exactly the run's length."""
     keys = streams(seed)
     disturbance = jax.random.normal(keys["disturbance"], (n_steps, len(WHEEL_TORQUES)))
     return (
@@ -146,7 +141,7 @@ def prepare(
     """
     seed = scenario.simulation.seed if seed is None else seed
     n_steps = scenario.simulation.n_steps
-    keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, drawn_length(n_steps))
+    keys, (k_build, k_identify, k_run), disturbance, noise = _seed_draws(seed, padded_length(n_steps))
     # the run's rows, cut on the host: a slice in JAX would compile a program per length
     disturbance, noise = (jax.device_put(np.asarray(d)[:n_steps]) for d in (disturbance, noise))
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
