@@ -17,7 +17,7 @@ per control period and carry its state:
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 from jax import Array
@@ -150,9 +150,10 @@ def _sin_over(a: Array) -> Array:
     return jnp.where(small, 1.0 - a**2 / 6.0 + a**4 / 120.0, jnp.sin(safe) / safe)
 
 
-def body_increments(increments: Array, wheel_radius: Array | float, half_axle: Array | float) -> tuple[Array, Array]:
+def body_increments(increments: Any, wheel_radius: Array | float, half_axle: Array | float) -> tuple[Any, Any]:
     """(distance [m], turn [rad]) of the axle midpoint from the wheel-angle increments (dphi_R, dphi_L) [rad]:
-    R (dphi_R + dphi_L) / 2 and R (dphi_R - dphi_L) / (2 L) (model.md §1.1)."""
+    R (dphi_R + dphi_L) / 2 and R (dphi_R - dphi_L) / (2 L) (model.md §1.1). Plain arithmetic: JAX or NumPy
+    arrays in (rates give the midpoint's speeds), the same kind out."""
     right, left = increments[0], increments[1]
     return wheel_radius * (right + left) / 2.0, wheel_radius * (right - left) / (2.0 * half_axle)
 

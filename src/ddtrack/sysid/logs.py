@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
+from ..model.sensing import body_increments
 from .fit import SpeedLog
 from .motor import MotorLog
 
@@ -99,10 +100,9 @@ def _joint_efforts(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _wheel_joint_speeds(reader: Any, topic: str, radius: float, half: float) -> tuple[np.ndarray, np.ndarray]:
-    """The stamps [ns] and (v, omega) of the wheels' speeds: R (phi_R + phi_L) / 2, R (phi_R - phi_L) / (2 L)."""
+    """The stamps [ns] and (v, omega) of the wheels' speeds (no slip): the axle midpoint's per second."""
     stamps, rates = _wheel_joints(reader, topic, "velocity", "record the wheel speeds, or measure with --speeds odom")
-    v = radius * (rates[:, 0] + rates[:, 1]) / 2
-    return stamps, np.column_stack([v, radius * (rates[:, 0] - rates[:, 1]) / (2 * half)])
+    return stamps, np.column_stack(body_increments(rates.T, radius, half))
 
 
 def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
