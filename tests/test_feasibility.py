@@ -62,3 +62,21 @@ def test_the_remedy_names_saturation_as_the_cause():
     assert "lower the gains" in remedy("diverged", {"saturated": np.ones(3)})  # failed at once: no evidence
     assert "could not do what the reference asked" in remedy("diverged", saturated)
     assert "lower the gains" in remedy("diverged", {"saturated": np.zeros(100)})
+
+
+@pytest.mark.parametrize("name", ["paper_square", "figure_eight"])
+def test_the_sampled_reference_is_the_reference_at_each_period(name):
+    """The load-time checks sample the reference over a padded length (one program for many lengths) and keep
+    the run's samples: they must be the trajectory's own values at t = 0, T_c, ..., the duration."""
+    import jax
+
+    from ddtrack.feasibility import sample_reference
+
+    scenario = ddtrack.load_scenario(SCENARIOS / f"{name}.toml")
+    sim = scenario.simulation
+    times = np.linspace(0.0, sim.duration, int(sim.duration / sim.control_period) + 1)
+    expected = jax.vmap(scenario.trajectory.build())(times)
+    sampled = sample_reference(scenario)
+    for got, want in zip(jax.tree_util.tree_leaves(sampled), jax.tree_util.tree_leaves(expected), strict=True):
+        assert got.shape == times.shape
+        np.testing.assert_allclose(got, np.asarray(want), rtol=0, atol=1e-12)
