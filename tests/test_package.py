@@ -251,3 +251,10 @@ def test_no_source_file_is_over_500_lines():
     """One concern per file (docs/architecture.md): a module that grows past 500 lines is split, not scrolled."""
     lengths = {str(p.relative_to(PACKAGE)): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")}
     assert len(lengths) > 60 and max(lengths.values()) <= 500, sorted(lengths.items(), key=lambda kv: -kv[1])[:3]
+
+
+def test_the_suite_order_names_test_files_that_exist():
+    """A renamed test file would silently lose its place at the head of the queue (tests/conftest.py)."""
+    from conftest import LONGEST_FIRST
+
+    assert [name for name in LONGEST_FIRST if not (ROOT / "tests" / name).is_file()] == []

@@ -43,6 +43,13 @@ def test_help_and_version_load_no_heavy_library():
     assert loaded("from ddtrack.cli import main\nmain(['--help'])\nmain(['--version'])") == []
 
 
+def test_loading_a_scenario_loads_only_jax():
+    """SciPy's interpolation (0.2 s) waits for a timed-waypoints reference, the figures' libraries for the run
+    folder: a scenario that needs neither loads neither."""
+    code = "import ddtrack\nddtrack.enable_float64()\nddtrack.load_scenario('scenarios/paper_line.toml')"
+    assert loaded(code) == ["jax"]
+
+
 @pytest.mark.parametrize("first", ["ddtrack", "jax"])
 def test_importing_ddtrack_leaves_jax_alone_and_registers_the_environment(first):
     """Whichever comes first, JAX stays in float32 until the script says otherwise (a process-wide setting is the

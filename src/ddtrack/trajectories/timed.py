@@ -19,7 +19,6 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
-from scipy.interpolate import CubicSpline
 
 from .._pytree import pytree_dataclass
 from ..geometry import wrap_angle
@@ -119,6 +118,8 @@ def timed_path(
     coefficients = np.zeros((n - 1, 2, 4))
     coefficients[:, :, 3] = p[:-1]  # a stop is its point; a stretch overwrites its pieces below
     held = np.zeros((n - 1, 2))
+    from scipy.interpolate import CubicSpline  # here, not at the top: 0.2 s that every ddtrack command would pay
+
     for a, b in _stretches(still):
         ends = [_end_velocity(p, v, yaw, row, leg) for row, leg in ((a, a), (b, b - 1))]
         spline = CubicSpline(t[a : b + 1], p[a : b + 1], bc_type=((1, ends[0]), (1, ends[1])))
