@@ -107,6 +107,19 @@ def test_a_warm_run_needs_few_programs_and_the_cache_answers_each(tmp_path):
     assert json.loads((tmp_path / "warm" / "metrics.json").read_text())["status"] == "ok"
 
 
+def test_the_nn_identification_is_one_program():
+    """Run op by op, the identification's glue (the exciting reference's sines, the draws, the samples) was some 90
+    small programs, each traced and looked up on its own: 1.2 s of a warm NN-adaptive run."""
+    code = (
+        "import ddtrack\nfrom ddtrack.runner import prepare\nddtrack.enable_float64()\n"
+        "spec = ddtrack.load_scenario('scenarios/paper_line.toml', controller='nn_adaptive_backstepping', overrides="
+        "['controller.identification_duration=1', 'controller.epochs=1'])\nprepare(spec)"
+    )
+    programs = [line for line in python(code, JAX_LOG_COMPILES="1").splitlines() if "Compiling " in line]
+    assert any("Compiling jit(identify) " in line for line in programs), "\n".join(programs)
+    assert not any(f"Compiling jit({glue}) " in line for line in programs for glue in ("sin", "scan")), programs
+
+
 def test_the_plain_script_reads_the_case_as_ddtrack_does():
     """bench/speed.py's baseline process simulates the same closed loop as ``ddtrack run``."""
     sys.path.insert(0, str(ROOT / "bench"))

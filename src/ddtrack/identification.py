@@ -9,6 +9,7 @@ shuffled epochs of per-sample backpropagation with momentum.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -157,6 +158,9 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
     return jnp.mean((predictions - targets) ** 2, axis=0) / jnp.var(targets, axis=0)
 
 
+# one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 140 small
+# programs, each traced and looked up on its own (1.2 s of a warm NN-adaptive `ddtrack run`, docs/benchmarks.md)
+@partial(jax.jit, static_argnames=("duration", "epochs", "control_period", "substeps", "reference_scale"))
 def identify(
     plant: RobotParams | Plant,
     inner: object | None,
