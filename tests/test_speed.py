@@ -109,7 +109,7 @@ def test_a_warm_run_needs_few_programs_and_the_cache_answers_each(tmp_path):
 
 def test_the_nn_identification_is_one_program():
     """Run op by op, the identification's glue (the exciting reference's sines, the draws, the samples) was some 90
-    small programs, each traced and looked up on its own: 1.2 s of a warm NN-adaptive run."""
+    small programs, each traced and looked up on its own: 0.5 s of a warm NN-adaptive run."""
     code = (
         "import ddtrack\nfrom ddtrack.runner import prepare\nddtrack.enable_float64()\n"
         "spec = ddtrack.load_scenario('scenarios/paper_line.toml', controller='nn_adaptive_backstepping', overrides="

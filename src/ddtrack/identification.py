@@ -158,8 +158,8 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
     return jnp.mean((predictions - targets) ** 2, axis=0) / jnp.var(targets, axis=0)
 
 
-# one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 140 small
-# programs, each traced and looked up on its own (1.2 s of a warm NN-adaptive `ddtrack run`, docs/benchmarks.md)
+# one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 90 small
+# programs, each traced and looked up on its own (0.5 s of a warm NN-adaptive `ddtrack run`, docs/benchmarks.md)
 @partial(jax.jit, static_argnames=("duration", "epochs", "control_period", "substeps", "reference_scale"))
 def identify(
     plant: RobotParams | Plant,
@@ -183,7 +183,9 @@ def identify(
 ) -> Identification:
     """Collect identification data on ``plant`` (a plant, or the dynamic plant's parameters) under ``inner``
     (None: velocity commands) and train ``emulator`` on it (model.md §3.7 schedule, step 1); ``reference_scale``
-    is :func:`identification_scale`'s (k_v, k_omega)."""
+    is :func:`identification_scale`'s (k_v, k_omega). Compiled as one program for each ``duration``, ``epochs``,
+    ``control_period``, ``substeps`` and ``reference_scale`` (static); the other arguments may vary without a
+    compile."""
     k_data, k_train = jax.random.split(key)
     z, targets = collect(
         plant,
