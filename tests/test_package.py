@@ -253,8 +253,11 @@ def test_no_source_file_is_over_500_lines():
     assert len(lengths) > 60 and max(lengths.values()) <= 500, sorted(lengths.items(), key=lambda kv: -kv[1])[:3]
 
 
-def test_the_suite_order_names_test_files_that_exist():
-    """A renamed test file would silently lose its place at the head of the queue (tests/conftest.py)."""
+def test_the_suite_runs_its_longest_files_first():
+    """The order of tests/conftest.py holds: every file it names exists (a renamed one would silently lose its
+    place), and scripts/check keeps xdist from reordering the files by their number of tests."""
     from conftest import LONGEST_FIRST
 
     assert [name for name in LONGEST_FIRST if not (ROOT / "tests" / name).is_file()] == []
+    pytest_line = next(line for line in (ROOT / "scripts" / "check").read_text().splitlines() if "-m pytest" in line)
+    assert "--dist loadfile" in pytest_line and "--no-loadscope-reorder" in pytest_line, pytest_line
