@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import central_difference
+from conftest import central_difference, simulate_unbatched
 from jax.flatten_util import ravel_pytree
 
 import ddtrack
@@ -37,7 +37,6 @@ from ddtrack.geometry import body_increment, posture_error, rotation
 from ddtrack.identification import identify
 from ddtrack.model import RobotParams
 from ddtrack.runner import prepare, run_setup
-from ddtrack.sim import simulate
 from ddtrack.trajectories import Reference
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -127,26 +126,6 @@ def body_basis(theta) -> jnp.ndarray:
 # --- item 14: Lambda = 0 is backstepping --------------------------------------------------------------
 
 
-def simulate_unbatched(scenario, setup, draws):
-    """One run through the unbatched simulator, ``ddtrack.sim.simulate`` (``ddtrack.run`` uses the batch program)."""
-    sim = scenario.simulation
-    return ddtrack.timeseries(
-        simulate(
-            setup.plant,
-            setup.controller,
-            setup.trajectory,
-            setup.x0,
-            draws,
-            n_steps=sim.n_steps,
-            control_period=sim.control_period,
-            substeps=sim.substeps,
-            disturbance=setup.disturbance,
-            noise=setup.noise,
-            divergence_error=scenario.divergence_distance(),
-        )
-    )
-
-
 @pytest.mark.parametrize("identification", [False, True], ids=["untrained", "identified"])
 def test_zero_rates_reproduce_backstepping_bit_for_bit(line, identification):
     """The law itself, on the unbatched simulator. Through ``ddtrack.run`` (a batch's row, tests/test_determinism.py)
@@ -156,9 +135,9 @@ def test_zero_rates_reproduce_backstepping_bit_for_bit(line, identification):
     scenario = ddtrack.load_scenario(LINE, overrides=[NN, *overrides])
     setup, draws = prepare(scenario, identification=line["identification"] if identification else None)
     assert (setup.identification is not None) == identification
-    nn = simulate_unbatched(scenario, setup, draws)
+    nn = ddtrack.timeseries(simulate_unbatched(scenario, setup, draws))
     backstepping = ddtrack.load_scenario(LINE)
-    bs = simulate_unbatched(backstepping, *prepare(backstepping))
+    bs = ddtrack.timeseries(simulate_unbatched(backstepping, *prepare(backstepping)))
     for name in SHARED:
         assert np.array_equal(nn[name], bs[name]), name
     batched = run_line(*overrides, identification=line["identification"] if identification else None)[0]
