@@ -8,6 +8,7 @@ must pass. The package itself is checked by scripts/check, before the tests.
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -49,7 +50,10 @@ def _write(folder: Path, source: str) -> Path:
 
 
 def test_the_type_checker_catches_a_wrong_call_into_ddtrack(tmp_path):
-    config = ["--config-file", str(ROOT / "pyproject.toml"), "--cache-dir", str(tmp_path / "cache")]
+    cache = tmp_path / "cache"
+    if (ROOT / ".mypy_cache").is_dir():  # scripts/check's own mypy run, just before: 5 s of analysis saved
+        shutil.copytree(ROOT / ".mypy_cache", cache)  # a copy: mypy re-checks any module whose source changed
+    config = ["--config-file", str(ROOT / "pyproject.toml"), "--cache-dir", str(cache)]
     wrong = _tool("mypy", *config, str(_write(tmp_path, WRONG_CALL)), cwd=tmp_path)
     assert wrong.returncode == 1, wrong.stdout + wrong.stderr
     errors = [line for line in wrong.stdout.splitlines() if ": error:" in line]
