@@ -34,10 +34,10 @@ def case_metrics(path: Path, controller: str | None) -> dict:
     """``metrics.json`` of the case, as ``ddtrack run`` writes it; ``controller`` None: the scenario's own, whole.
 
     The scenario's own case runs as ``ddtrack run`` runs it (row 0 of a batch of two). The 3 s cases of the other
-    controllers run through the unbatched simulator (conftest.simulate_unbatched), which compiles a third faster
-    and traces three times faster; it rounds a few values differently in the last bit, and every metric still
-    agrees with the record (made through the batch program) to 1e-12. That a run's bits are its batch row's is
-    tests/test_determinism.py's to check, for every controller."""
+    controllers run through the unbatched simulator (conftest.simulate_unbatched), whose program compiles about a
+    quarter faster and traces three times faster. It rounds a few values differently in the last bit, and every
+    metric still agrees with the record (made through the batch program) to 1e-12. That a run's bits are its batch
+    row's is tests/test_determinism.py's to check, for every controller."""
     import ddtrack
     from ddtrack.errors import ConfigError
     from ddtrack.runner import prepare, run_record, run_setup
