@@ -613,11 +613,11 @@ def time_ddtrack(scenario, setup, draws, repeats: int) -> dict:
     """``runner.batch_metrics`` (sharded simulation + host metrics) and the sharded jitted simulation alone."""
     import jax
 
-    from ddtrack.runner import _metric_series, _steps, batch_metrics, shard_runs
+    from ddtrack.runner import _metric_series, batch_metrics, run_options, shard_runs
 
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     runs = shard_runs(runs)  # as batch_metrics does
-    simulate_only = lambda: jax.block_until_ready(_metric_series(*runs, **_steps(scenario)))  # noqa: E731
+    simulate_only = lambda: jax.block_until_ready(_metric_series(*runs, **run_options(scenario)))  # noqa: E731
     metrics = lambda: batch_metrics(scenario, setup, draws)  # noqa: E731
     start = time.perf_counter()
     metrics()

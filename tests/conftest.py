@@ -43,21 +43,18 @@ def simulate_unbatched(scenario, setup, draws):
     """A prepared run (``ddtrack.runner.prepare``) through the unbatched simulator, ``ddtrack.sim.simulate``, as a
     ``SimResult``. ``ddtrack run`` simulates it as row 0 of a batch of two (``ddtrack.sim.simulate_alone``), which
     compiles about a third slower and rounds a few values differently in the last bit (both measured)."""
+    from ddtrack.runner import run_options
     from ddtrack.sim import simulate
 
-    sim = scenario.simulation
     return simulate(
         setup.plant,
         setup.controller,
         setup.trajectory,
         setup.x0,
         draws,
-        n_steps=sim.n_steps,
-        control_period=sim.control_period,
-        substeps=sim.substeps,
         disturbance=setup.disturbance,
         noise=setup.noise,
-        divergence_error=scenario.divergence_distance(),
+        **run_options(scenario),  # the options ddtrack run's program takes
     )
 
 

@@ -286,11 +286,13 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
-        return simulate_batch(*runs, **_steps(scenario))
-    return simulate_alone(*runs, **_steps(scenario))  # as a batch's row, bit for bit
+        return simulate_batch(*runs, **run_options(scenario))
+    return simulate_alone(*runs, **run_options(scenario))  # as a batch's row, bit for bit
 
 
-def _steps(scenario: Scenario) -> dict:
+def run_options(scenario: Scenario) -> dict:
+    """The static timing and the limits every simulation of ``scenario`` takes (single run, batch, Monte Carlo
+    chunk): keyword arguments of ``ddtrack.sim.simulate`` and its batched forms."""
     sim = scenario.simulation
     return {
         "n_steps": sim.n_steps,
@@ -388,7 +390,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     runs = shard_runs(
         (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     )
-    series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **_steps(scenario)))
+    series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **run_options(scenario)))
     e_xy = series.pop("e_xy")
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
