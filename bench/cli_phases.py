@@ -55,6 +55,7 @@ def phases(scenario: Path, out: Path) -> dict[str, float | int]:
     from ddtrack import cli  # what `ddtrack` imports before it knows the command
     from ddtrack._after_import import after_import
 
+    cli.collect_garbage_rarely()  # as the command
     after_import("jax", cli.one_device_per_core)  # as the command: its compile-cache entries are this run's
     after_import("jax", lambda jax: jax.config.update("jax_enable_x64", True))  # as the command: float64
     from ddtrack.scenario import load_scenario

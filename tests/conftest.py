@@ -12,12 +12,13 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")  # headless, as the ddtrack command draws (set before Matplotlib loads)
 
 import ddtrack
-from ddtrack.cli import main
+from ddtrack.cli import collect_garbage_rarely, main
 from ddtrack.compilations import mapping_limit, memory_mappings, release_compilations
 
 # a crashing test process writes no core file: a pytest worker holds gigabytes, which would land in the checkout
 resource.setrlimit(resource.RLIMIT_CORE, (0, resource.getrlimit(resource.RLIMIT_CORE)[1]))
 ddtrack.enable_float64()  # as a script must, before any test builds an array
+collect_garbage_rarely()  # as the ddtrack process does: a worker's full collections walk every program it holds
 # The persistent compilation cache stays off in the test processes (see below), yet JAX 0.10 still hashes every
 # program into a cache key and takes its cache-writing path unless the cache is disabled outright: do that, so the
 # thousands of in-process compilations take the plain path (a pytest worker once segfaulted inside that path)
