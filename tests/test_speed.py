@@ -94,8 +94,10 @@ def test_the_ddtrack_process_collects_garbage_in_large_rounds_and_a_script_keeps
         "cli.main = lambda: print('PROCESS', gc.get_threshold()) or 0\n"
         "cli.entry_point()"
     )
+    from ddtrack.cli import GC_THRESHOLDS
+
     seen = dict(line.split(" ", 1) for line in out.splitlines() if line.startswith(("SCRIPT", "AFTER_", "PROCESS")))
-    assert seen["SCRIPT"] == seen["AFTER_MAIN"] != seen["PROCESS"] == "(100000, 10, 10)", out
+    assert seen["SCRIPT"] == seen["AFTER_MAIN"] != seen["PROCESS"] == str(GC_THRESHOLDS), out
 
 
 def compile_log(cache: Path, out: Path) -> str:

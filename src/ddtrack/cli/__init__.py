@@ -331,18 +331,18 @@ def one_device_per_core(jax: ModuleType) -> None:
     )
 
 
-#: Python's cyclic garbage collector runs once GC_YOUNG more objects were allocated than freed (Python's default:
-#: 700), and looks at the older generations after every 10 such runs. A ``ddtrack run`` allocates millions of
+#: Python's cyclic garbage collector runs once GC_THRESHOLDS[0] more objects were allocated than freed (Python's
+#: default: 700), and looks at the older generations after every 10 such runs. A ``ddtrack run`` allocates millions of
 #: short-lived, mostly acyclic objects (imports, tracing, figures): at the default, some 630 collections took 0.3 s
 #: of a 2 s warm run, and 5 of 112 s in a pytest worker (measured, docs/benchmarks.md). Cycles are still collected,
 #: only in larger rounds.
-GC_YOUNG = 100_000
+GC_THRESHOLDS = (100_000, 10, 10)
 
 
 def collect_garbage_rarely() -> None:
-    """Set the process's garbage-collection thresholds to (GC_YOUNG, 10, 10). The ``ddtrack`` process does it at
+    """Set the process's garbage-collection thresholds to GC_THRESHOLDS. The ``ddtrack`` process does it at
     start (:func:`entry_point`), and the test session as well; a script calling :func:`main` keeps its own."""
-    gc.set_threshold(GC_YOUNG, 10, 10)
+    gc.set_threshold(*GC_THRESHOLDS)
 
 
 def entry_point() -> None:
