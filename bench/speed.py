@@ -34,6 +34,11 @@ In one process, in this order:
    simulate in plain Python, write the states), run just before each cold/warm pair so that the three share
    the machine's load; ``ratio_cold`` / ``ratio_warm`` = cold_cli_s / warm_cli_s over python_process_s
    (targets: <= 6 and <= 3). ``--cli-only`` measures only this.
+9. ``floor_process_s``: the whole process that only imports what ``ddtrack run`` imports (the command line, the
+   scenario models, JAX, Matplotlib's pyplot, pyarrow's Parquet writer), starts JAX's float64 CPU backend and exits
+   as ``ddtrack`` does (``os._exit``): what any ``ddtrack run`` costs before it reads its scenario. Interleaved
+   with the three above; ``ratio_floor`` = floor_process_s / python_process_s, the lowest ``ratio_warm`` this
+   command could reach with these libraries.
 
 Medians resist the noise of a shared machine; the minimum of each series is reported beside it.
 """
@@ -247,12 +252,22 @@ def ddtrack_command() -> list[str]:
     return [found] if found else [sys.executable, "-m", "ddtrack"]
 
 
+#: what ``ddtrack run`` imports and starts before it reads the scenario, then its exit (ddtrack.cli.exit_now)
+FLOOR_CODE = (
+    "import gc, os; gc.set_threshold(100_000, 10, 10); import ddtrack.cli, ddtrack.scenario, ddtrack.runner, jax; "
+    "jax.config.update('jax_enable_x64', True); ddtrack.runner.enable_compilation_cache(); "
+    "jax.numpy.zeros(1).block_until_ready(); "
+    "import matplotlib.pyplot, pyarrow.parquet; os._exit(0)"
+)
+
+
 def measure_cli(repeats: int) -> dict[str, object]:
     """Whole processes, interleaved so that they share the machine's load: ``python bench/python_loop.py`` (the
-    case as a plain script) and ``ddtrack run`` cold (an empty compile cache) and warm (that cache populated)."""
+    case as a plain script), ``ddtrack run`` cold (an empty compile cache) and warm (that cache populated), and the
+    floor: a process that only imports and starts what ``ddtrack run`` needs (FLOOR_CODE)."""
     command = ddtrack_command()
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_", "XLA_"))}
-    cold, warm, plain, entries = [], [], [], []
+    cold, warm, plain, floor, entries = [], [], [], [], []
     with tempfile.TemporaryDirectory(prefix="ddtrack-bench-") as scratch:
         scratch = Path(scratch)
 
@@ -274,6 +289,7 @@ def measure_cli(repeats: int) -> dict[str, object]:
             cold.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"cold{i}")], cache))
             entries.append(sum(1 for p in cache.rglob("*") if p.is_file()))
             warm.append(timed([*command, "run", str(SCENARIO), "--out", str(scratch / f"warm{i}")], cache))
+            floor.append(timed([sys.executable, "-c", FLOOR_CODE], cache))
         phases = json.loads(
             subprocess.run(
                 [
@@ -303,6 +319,10 @@ def measure_cli(repeats: int) -> dict[str, object]:
         "ratio_cold_min": min(cold) / min(plain),
         "ratio_warm": statistics.median(warm) / python_s,
         "ratio_warm_min": min(warm) / min(plain),
+        "floor_process_s": statistics.median(floor),
+        "floor_process_min_s": min(floor),
+        "ratio_floor": statistics.median(floor) / python_s,
+        "ratio_floor_min": min(floor) / min(plain),
         "cli_repeats": repeats,
         "cli_cache_files": entries[0],
         **{f"phase_{name}": value for name, value in phases.items()},
@@ -331,6 +351,8 @@ ROWS = [
     ("warm_cli_s", "`ddtrack run`, populated cache"),
     ("ratio_cold", "cold `ddtrack run` / python process (<= 6)"),
     ("ratio_warm", "warm `ddtrack run` / python process (<= 3)"),
+    ("floor_process_s", "imports and JAX start of `ddtrack run` alone"),
+    ("ratio_floor", "that floor / python process"),
     ("phase_total_s", "warm run in process (bench/cli_phases.py)"),
     ("phase_import_s", "  import (click, scenario, JAX)"),
     ("phase_load_s", "  load and validate the scenario"),

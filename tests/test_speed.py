@@ -146,3 +146,21 @@ def test_the_plain_script_reads_the_case_as_ddtrack_does():
 
     path = ROOT / "scenarios" / "paper_line.toml"
     assert params_from_toml(path) == params_from_scenario(ddtrack.load_scenario(path))
+
+
+def test_the_floor_process_imports_everything_a_run_does(tmp_path):
+    """bench/speed.py's floor (imports and backend start alone) is a floor of ``ddtrack run``: a run loads no heavy
+    library the floor process did not."""
+    sys.path.insert(0, str(ROOT / "bench"))
+    from speed import FLOOR_CODE
+
+    setup, exit_now = FLOOR_CODE.rsplit("; ", 1)
+    assert exit_now == "os._exit(0)"
+    heavy = f"{{m for m in {HEAVY!r} if m in sys.modules}}"
+    code = (
+        f"{setup}\nimport json, sys\nfloor = {heavy}\nfrom ddtrack.cli import main\n"
+        f"assert main(['run', 'scenarios/paper_line.toml', '--out', {str(tmp_path / 'run')!r}, *{SHORT!r}]) == 0\n"
+        f"print('HEAVY', json.dumps({{'floor': sorted(floor), 'run': sorted({heavy} - floor)}}))"
+    )
+    loaded = json.loads(python(code).split("HEAVY ", 1)[1].splitlines()[0])
+    assert loaded["run"] == [] and {"jax", "matplotlib", "pyarrow"} <= set(loaded["floor"]), loaded
