@@ -119,6 +119,7 @@ def test_example_runs(path, tmp_path, tmp_path_factory):
     (blocker / "pandas").mkdir()
     (blocker / "pandas" / "__init__.py").write_text("raise ImportError('pandas is not part of the install')\n")
     env = os.environ | {"PYTHONPATH": os.pathsep.join(filter(None, (str(blocker), os.environ.get("PYTHONPATH"))))}
+    env["TMPDIR"] = str(tmp_path_factory.mktemp("tmp"))  # an example's temporary folders: pytest cleans them
     args = re.search(r"^# test-args:(.*)$", path.read_text(), flags=re.M)
     command = [sys.executable, str(path), *(shlex.split(args.group(1)) if args else [])]
     done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
