@@ -36,9 +36,9 @@ In one process, in this order:
    (targets: <= 6 and <= 3). ``--cli-only`` measures only this.
 9. ``floor_process_s``: the whole process that only imports what ``ddtrack run`` imports (the command line, the
    scenario models, JAX, Matplotlib's pyplot, pyarrow's Parquet writer), starts JAX's float64 CPU backend and exits
-   as ``ddtrack`` does (``os._exit``): what any ``ddtrack run`` costs before it reads its scenario. Interleaved
-   with the three above; ``ratio_floor`` = floor_process_s / python_process_s, the lowest ``ratio_warm`` this
-   command could reach with these libraries.
+   as ``ddtrack`` does (without the interpreter's teardown): what any ``ddtrack run`` costs before it reads its
+   scenario. Interleaved with the three above; ``ratio_floor`` = floor_process_s / python_process_s, the lowest
+   ``ratio_warm`` this command could reach with these libraries.
 
 Medians resist the noise of a shared machine; the minimum of each series is reported beside it.
 """
@@ -252,12 +252,12 @@ def ddtrack_command() -> list[str]:
     return [found] if found else [sys.executable, "-m", "ddtrack"]
 
 
-#: what ``ddtrack run`` imports and starts before it reads the scenario, then its exit (ddtrack.cli.exit_now)
+#: what the ``ddtrack`` process sets, imports and starts before it reads a scenario (ddtrack.cli.entry_point), then
+#: its exit (ddtrack.cli.exit_now)
 FLOOR_CODE = (
-    "import gc, os; gc.set_threshold(100_000, 10, 10); import ddtrack.cli, ddtrack.scenario, ddtrack.runner, jax; "
-    "jax.config.update('jax_enable_x64', True); ddtrack.runner.enable_compilation_cache(); "
-    "jax.numpy.zeros(1).block_until_ready(); "
-    "import matplotlib.pyplot, pyarrow.parquet; os._exit(0)"
+    "import ddtrack.cli; ddtrack.cli.collect_garbage_rarely(); import ddtrack.scenario, ddtrack.runner, jax; "
+    "ddtrack.cli.one_device_per_core(jax); ddtrack.enable_float64(); ddtrack.runner.enable_compilation_cache(); "
+    "jax.numpy.zeros(1).block_until_ready(); import matplotlib.pyplot, pyarrow.parquet; ddtrack.cli.exit_now(0)"
 )
 
 
