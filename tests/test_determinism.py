@@ -204,6 +204,37 @@ def test_total_adds_in_one_order_whatever_the_batch():
     assert float(alone) == pytest.approx(math.fsum(rows[0]), rel=1e-14)
 
 
+@pytest.mark.slow
+def test_reproduce_runs_each_variant_as_a_batch_whose_rows_are_the_single_runs(monkeypatch):
+    """``ddtrack reproduce`` simulates each controller variant as one batch over the seeds, and the variants that
+    identify share one batch of identifications. Each seed's metrics, and seed 0's series, are those of the same
+    seeds' batch run alone, identifying on its own (that a batch's row is its single run, identification included,
+    is the tests' above to check)."""
+    import ddtrack.reproduce as reproduce_module
+
+    handed = []  # the identification each variant's batch was handed (None: it identifies, or needs none)
+
+    def prepare_batch(scenario, seeds, *, identification=None):
+        handed.append(identification)
+        return ddtrack.runner.prepare_batch(scenario, seeds, identification=identification)
+
+    monkeypatch.setattr(reproduce_module, "prepare_batch", prepare_batch)
+    short = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
+    variants = {
+        "backstepping": ["controller.kind=backstepping", *short],
+        "nn_adaptive": [*reproduce_module.NN, *short, *NN_SHORT],
+        "nn_no_online_learning": [*reproduce_module.NN, *short, *NN_SHORT, "controller.online_learning=false"],
+    }
+    case = reproduce_module.run_case("paper_line", 2, variants)
+    assert handed[:2] == [None, None] and handed[2] is not None  # the second NN variant reuses the first's
+    for variant, overrides in variants.items():
+        scenario = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=overrides)
+        batch = run_batch(scenario, [0, 1])
+        runs = [row(batch, i) for i in (0, 1)]
+        assert case.metrics[variant] == [metrics_of(scenario, run) for run in runs], variant
+        assert_same_bits(case.series[variant], ddtrack.timeseries(runs[0]))
+
+
 def test_single_and_batched_runs_take_the_same_divergence_options():
     """``simulate_batch`` and ``simulate_alone`` take ``divergence_speed`` as ``simulate`` does (they dropped it): a
     0.3 m/s bound stops the paper's line run, which reaches 1.9 m/s, at the same period in every form."""

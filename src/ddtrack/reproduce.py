@@ -24,7 +24,7 @@ from ._format import with_interval
 from .metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
 from .outdir import atomic_write
 from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
-from .runner import prepare, run_setup
+from .runner import prepare_batch, row, run_setup
 from .scenario import Scenario, load_scenario
 from .shipped import scenario_path
 from .sim import timeseries
@@ -63,17 +63,19 @@ class CaseResult:
 def run_case(
     name: str, seeds: int, variants: dict[str, list[str]], progress: Callable[[str], None] = lambda _: None
 ) -> CaseResult:
-    """Run every variant of one case for seeds 0..seeds-1."""
+    """Run every variant of one case for seeds 0..seeds-1, each variant as one batch over the seeds (a batch's row
+    is its single run, bit for bit: ``ddtrack.runner.run_batch``)."""
     path = scenario_path(name)
     scenarios = {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
     result = CaseResult(scenario=scenarios["backstepping"])
-    for seed in range(seeds):
-        identification = None  # shared by the variants that identify (same plant, seed and emulator init)
-        for variant, scenario in scenarios.items():
-            setup, draws = prepare(scenario, seed=seed, identification=identification)
-            identification = setup.identification if setup.identification is not None else identification
-            sim = scenario.simulation
-            run = run_setup(scenario, setup, draws)
+    identification = None  # shared by the variants that identify (the same plants, seeds and emulator inits)
+    for variant, scenario in scenarios.items():
+        setup, draws = prepare_batch(scenario, range(seeds), identification=identification)
+        identification = setup.identification if setup.identification is not None else identification
+        runs = run_setup(scenario, setup, draws, batched=True)
+        sim = scenario.simulation
+        for seed in range(seeds):
+            run = row(runs, seed)
             columns = timeseries(run)
             metrics = summarize(
                 columns,

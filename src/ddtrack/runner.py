@@ -215,29 +215,33 @@ def shard_runs(tree: Batched) -> Batched:
     return jax.device_put(tree, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("runs")))
 
 
-def prepare_batch(scenario: Scenario, seeds: Sequence[int]) -> tuple[Setup, Draws]:
+def prepare_batch(
+    scenario: Scenario, seeds: Sequence[int], *, identification: Identification | None = None
+) -> tuple[Setup, Draws]:
     """:func:`prepare` for many seeds, stacked along a leading batch axis; NN emulators are identified
-    for all the runs at once (``vmap``)."""
+    for all the runs at once (``vmap``), or taken from ``identification``: a batch's emulators already identified
+    for the same plants and seeds (ablations that only change the gain law)."""
     pairs = [prepare(scenario, seed=seed, identify=False) for seed in seeds]
     fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise", "sensing_key")
     setup = dataclasses.replace(pairs[0][0], **{f: stack([getattr(p[0], f) for p in pairs]) for f in fields})
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
-        identify_all = vmap_runs(_identifier(scenario, setup))
-        found = identify_all(
-            *shard_runs(
-                (
-                    setup.plant_params,
-                    getattr(setup.controller, "inner", None),
-                    setup.controller.outer.emulator,
-                    keys,
-                    setup.disturbance,
-                    setup.noise,
+        if identification is None:
+            identify_all = vmap_runs(_identifier(scenario, setup))
+            identification = identify_all(
+                *shard_runs(
+                    (
+                        setup.plant_params,
+                        getattr(setup.controller, "inner", None),
+                        setup.controller.outer.emulator,
+                        keys,
+                        setup.disturbance,
+                        setup.noise,
+                    )
                 )
             )
-        )
-        setup = with_identification(scenario, setup, keys, found)
+        setup = with_identification(scenario, setup, keys, identification)
     return setup, draws
 
 
