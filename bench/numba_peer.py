@@ -47,6 +47,7 @@ import platform
 import statistics
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -610,14 +611,14 @@ def median_time(call, repeats: int) -> tuple[float, list[float]]:
 
 
 def time_ddtrack(scenario, setup, draws, repeats: int) -> dict:
-    """``runner.batch_metrics`` (sharded simulation + host metrics) and the sharded jitted simulation alone."""
+    """``runner.batch_metrics`` (simulation split over the devices + host metrics) and the split simulation alone."""
     import jax
 
-    from ddtrack.runner import _metric_series, batch_metrics, run_options, shard_runs
+    from ddtrack.runner import _metric_series, batch_metrics, on_each_device, run_options
 
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
-    runs = shard_runs(runs)  # as batch_metrics does
-    simulate_only = lambda: jax.block_until_ready(_metric_series(*runs, **run_options(scenario)))  # noqa: E731
+    series = partial(_metric_series, **run_options(scenario))
+    simulate_only = lambda: jax.block_until_ready(on_each_device(series, *runs))  # noqa: E731  # as batch_metrics
     metrics = lambda: batch_metrics(scenario, setup, draws)  # noqa: E731
     start = time.perf_counter()
     metrics()

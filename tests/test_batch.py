@@ -155,25 +155,38 @@ def test_mc_shows_a_progress_bar_on_a_terminal(tmp_path):
 
 
 def test_runs_split_over_two_cpu_devices_are_the_same_runs():
-    """``shard_runs`` spreads a chunk over JAX's CPU devices (``ddtrack`` asks for one per core): a subprocess
-    with two devices must give the rows this one-device process gives."""
+    """``on_each_device`` spreads a chunk over JAX's CPU devices (``ddtrack`` asks for one per core): a subprocess
+    with two devices must give the rows this one-device process gives, for backstepping and for the NN-adaptive law
+    with its whole identification (60 s, 100 epochs), whose emulators one program partitioned over the two devices
+    trained differently in the last bits."""
+    nn = [
+        "controller.kind=nn_adaptive_backstepping",
+        "simulation.duration=3",
+        "simulation.metric_window=[0, 3]",
+    ]
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo, shard_runs\n"
-        "assert len(jax.devices()) == 2 and len(shard_runs(jax.numpy.zeros(4)).sharding.device_set) == 2\n"
+        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo\n"
+        "assert len(jax.devices()) == 2\n"
         f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per device: left unsplit
+        f"nn = ddtrack.load_scenario({str(SCENARIOS / 'paper_line.toml')!r}, overrides={nn!r})\n"
+        "print(json.dumps(monte_carlo(nn, [0, 1, 2, 3], chunk_size=4)))\n"
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    sharded, pair = (json.loads(line) for line in done.stdout.splitlines()[-2:])
+    sharded, pair, sharded_nn = (json.loads(line) for line in done.stdout.splitlines()[-3:])
     here = monte_carlo(
         ddtrack.load_scenario(SCENARIOS / "figure_eight.toml", overrides=RANDOM), [0, 1, 2, 3], chunk_size=4
     )
     assert pair == here[:2]
     for a, b in zip(here, sharded, strict=True):
         assert a == b  # every metric, to the bit: each device simulates its two runs as a batch of two
+    here_nn = monte_carlo(
+        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=nn), [0, 1, 2, 3], chunk_size=4
+    )
+    assert here_nn == sharded_nn  # the identification NMSE among the metrics: the emulators too
 
 
 def test_mc_of_one_run_prints_its_mean_without_an_interval(tmp_path, cli):

@@ -202,17 +202,26 @@ def _identifier(scenario: Scenario, setup: Setup) -> Callable[..., Identificatio
     return run_identification
 
 
-def shard_runs(tree: Batched) -> Batched:
-    """Spread a batch (every leaf's leading axis is the run) over the available devices, so that each device
-    (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up) simulates its share;
-    unchanged on one device, when the runs do not split evenly, or when a device would get a single run (compiled
-    as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``)."""
+def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
+    """``function(*args)`` for a batch of runs (every array's leading axis is the run), the runs split evenly over
+    the available devices (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up),
+    each device computing its share as a batch of its own while the others compute theirs; the results are joined on
+    the host. Left whole on one device, when the runs do not split evenly, or when a device would get a single run
+    (computed as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``). Each share runs
+    the program a batch of its size gets on one device, so each row stays its single run bit for bit: one program
+    partitioned over the devices did not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
     devices = jax.devices()
-    runs = len(jax.tree_util.tree_leaves(tree)[0])
+    runs = len(jax.tree_util.tree_leaves(args)[0])
     if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
-        return tree
-    mesh = jax.sharding.Mesh(np.asarray(devices), ("runs",))
-    return jax.device_put(tree, jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("runs")))
+        return function(*args)
+    share = runs // len(devices)
+    host = jax.tree_util.tree_map(np.asarray, args)  # cut on the host: a slice in JAX compiles a program per shape
+    shares = [slice(i * share, (i + 1) * share) for i in range(len(devices))]
+    parts = [
+        function(*jax.device_put(jax.tree_util.tree_map(lambda leaf, rows=rows: leaf[rows], host), device))
+        for rows, device in zip(shares, devices, strict=True)
+    ]  # each call returns once its share is dispatched, so the devices compute side by side
+    return jax.tree_util.tree_map(lambda *leaves: np.concatenate([np.asarray(leaf) for leaf in leaves]), *parts)
 
 
 def prepare_batch(
@@ -228,18 +237,14 @@ def prepare_batch(
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
         if identification is None:
-            identify_all = vmap_runs(_identifier(scenario, setup))
-            identification = identify_all(
-                *shard_runs(
-                    (
-                        setup.plant_params,
-                        getattr(setup.controller, "inner", None),
-                        setup.controller.outer.emulator,
-                        keys,
-                        setup.disturbance,
-                        setup.noise,
-                    )
-                )
+            identification = on_each_device(
+                vmap_runs(_identifier(scenario, setup)),
+                setup.plant_params,
+                getattr(setup.controller, "inner", None),
+                setup.controller.outer.emulator,
+                keys,
+                setup.disturbance,
+                setup.noise,
             )
         setup = with_identification(scenario, setup, keys, identification)
     return setup, draws
@@ -391,10 +396,9 @@ def _metric_series(
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
     sim = scenario.simulation
-    runs = shard_runs(
-        (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
-    )
-    series, status, failure_index = jax.tree_util.tree_map(np.asarray, _metric_series(*runs, **run_options(scenario)))
+    runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+    metric_series = partial(_metric_series, **run_options(scenario))
+    series, status, failure_index = jax.tree_util.tree_map(np.asarray, on_each_device(metric_series, *runs))
     e_xy = series.pop("e_xy")
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
