@@ -166,8 +166,9 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     ]
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo\n"
-        "assert len(jax.devices()) == 2\n"
+        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo, on_each_device\n"
+        "seen = set()\non_each_device(lambda x: seen.update(x.devices()) or x, jax.numpy.zeros(4))\n"
+        "assert len(jax.devices()) == 2 and len(seen) == 2\n"  # the chunk is split: a share on each device
         f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per device: left unsplit
