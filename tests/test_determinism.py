@@ -219,7 +219,7 @@ def test_reproduce_runs_each_variant_as_a_batch_whose_rows_are_the_single_runs(m
         return ddtrack.runner.prepare_batch(scenario, seeds, identification=identification)
 
     monkeypatch.setattr(reproduce_module, "prepare_batch", prepare_batch)
-    short = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
+    short = RANDOM  # 3 s, and a plant mass drawn per seed, so that the seeds' rows differ
     variants = {
         "backstepping": ["controller.kind=backstepping", *short],
         "nn_adaptive": [*reproduce_module.NN, *short, *NN_SHORT],
@@ -232,6 +232,7 @@ def test_reproduce_runs_each_variant_as_a_batch_whose_rows_are_the_single_runs(m
         batch = run_batch(scenario, [0, 1])
         runs = [row(batch, i) for i in (0, 1)]
         assert case.metrics[variant] == [metrics_of(scenario, run) for run in runs], variant
+        assert case.metrics[variant][0] != case.metrics[variant][1], variant  # a row taken twice would show
         assert_same_bits(case.series[variant], ddtrack.timeseries(runs[0]))
 
 
