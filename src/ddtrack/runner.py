@@ -236,9 +236,8 @@ def prepare_batch(
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
-        if identification is None:
-            identification = on_each_device(
-                vmap_runs(_identifier(scenario, setup)),
+        if identification is None:  # on one device: split over the cores, it ran no faster (docs/benchmarks.md)
+            identification = vmap_runs(_identifier(scenario, setup))(
                 setup.plant_params,
                 getattr(setup.controller, "inner", None),
                 setup.controller.outer.emulator,
