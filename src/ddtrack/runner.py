@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from pathlib import Path
 from typing import TypeVar
@@ -205,23 +206,29 @@ def _identifier(scenario: Scenario, setup: Setup) -> Callable[..., Identificatio
 def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
     """``function(*args)`` for a batch of runs (every array's leading axis is the run), the runs split evenly over
     the available devices (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up),
-    each device computing its share as a batch of its own while the others compute theirs; the results are joined on
-    the host. Left whole on one device, when the runs do not split evenly, or when a device would get a single run
-    (computed as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``). Each share runs
-    the program a batch of its size gets on one device, so each row stays its single run bit for bit: one program
-    partitioned over the devices did not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
+    each device computing its share as a batch of its own, called from a thread of its own while the others compute
+    theirs; the results are joined on the host. Left whole on one device, when the runs do not split evenly, or when
+    a device would get a single run (computed as a lone run, it would round differently from its row in a batch:
+    ``sim.vmap_runs``). Each share runs the program a batch of its size gets on one device, so each row stays its
+    single run bit for bit: one program partitioned over the devices did not, for the NN-adaptive law (its
+    emulator's rows moved in the last bits)."""
     devices = jax.devices()
     runs = len(jax.tree_util.tree_leaves(args)[0])
     if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
         return function(*args)
     share = runs // len(devices)
     host = jax.tree_util.tree_map(np.asarray, args)  # cut on the host: a slice in JAX compiles a program per shape
-    shares = [slice(i * share, (i + 1) * share) for i in range(len(devices))]
-    parts = [
-        function(*jax.device_put(jax.tree_util.tree_map(lambda leaf, rows=rows: leaf[rows], host), device))
-        for rows, device in zip(shares, devices, strict=True)
-    ]  # each call returns once its share is dispatched, so the devices compute side by side
-    return jax.tree_util.tree_map(lambda *leaves: np.concatenate([np.asarray(leaf) for leaf in leaves]), *parts)
+
+    def compute(i: int) -> Batched:
+        rows = slice(i * share, (i + 1) * share)
+        part = function(*jax.device_put(jax.tree_util.tree_map(lambda leaf: leaf[rows], host), devices[i]))
+        return jax.tree_util.tree_map(np.asarray, part)
+
+    # a thread per device: called one after another from one thread, the NN identification's shares ran one after
+    # another, no faster than one device (docs/benchmarks.md, "ddtrack mc"); from a thread each, side by side
+    with ThreadPoolExecutor(len(devices)) as pool:
+        parts = list(pool.map(compute, range(len(devices))))
+    return jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *parts)
 
 
 def prepare_batch(
@@ -236,8 +243,9 @@ def prepare_batch(
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
-        if identification is None:  # on one device: split over the cores, it ran no faster (docs/benchmarks.md)
-            identification = vmap_runs(_identifier(scenario, setup))(
+        if identification is None:
+            identification = on_each_device(
+                vmap_runs(_identifier(scenario, setup)),
                 setup.plant_params,
                 getattr(setup.controller, "inner", None),
                 setup.controller.outer.emulator,
