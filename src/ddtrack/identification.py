@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from ._ordered import total
 from ._pytree import FloatVector
 from .controllers import Backstepping, Cascade, Dithered, Emulator, VelocityOutput
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
@@ -145,17 +146,21 @@ def train(
 
     def epoch(carry, epoch_key):
         carry, losses = jax.lax.scan(sample_step, carry, jax.random.permutation(epoch_key, zn.shape[0]))
-        return carry, jnp.mean(losses)
+        return carry, total(losses) / losses.shape[0]  # in a fixed order, whatever the batch (_ordered.py)
 
     (mlp, _), losses = jax.lax.scan(epoch, (emulator.mlp, zeros_like(emulator.mlp)), jax.random.split(key, epochs))
     return emulator.__class__(mlp, emulator.scales, emulator.uses_velocity), losses
 
 
 def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
-    """Mean squared error over the variance, per output channel."""
+    """Mean squared error over the variance, per output channel; both means summed in a fixed order, so that a run's
+    NMSE is the same bits alone and in any batch (a reduce kernel's order followed the batch: ``_ordered.py``)."""
     predictions = jax.vmap(lambda zi: forward(emulator.mlp, zi / emulator.scales.inputs)[0])(z)
     predictions = predictions * emulator.scales.outputs
-    return jnp.mean((predictions - targets) ** 2, axis=0) / jnp.var(targets, axis=0)
+    mean = jax.vmap(total, in_axes=1)  # per channel: mean(x)[j] = sum_i x[i, j] / n
+    n = targets.shape[0]
+    variance = mean((targets - mean(targets) / n) ** 2) / n
+    return mean((predictions - targets) ** 2) / n / variance
 
 
 # one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 90 small
