@@ -209,9 +209,9 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
     each device computing its share as a batch of its own, called from a thread of its own while the others compute
     theirs; the results are joined on the host. Left whole on one device, when the runs do not split evenly, or when
     a device would get a single run (computed as a lone run, it would round differently from its row in a batch:
-    ``sim.vmap_runs``). Each share runs the program a batch of its size gets on one device, so each row stays its
-    single run bit for bit: one program partitioned over the devices did not, for the NN-adaptive law (its
-    emulator's rows moved in the last bits)."""
+    ``sim.vmap_runs``). Each share runs the program a batch of its size gets on one device, so each row is the bits
+    that batch gives it (its single run's, below 16 runs per device: docs/reliability.md); one program partitioned
+    over the devices was not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
     devices = jax.devices()
     runs = len(jax.tree_util.tree_leaves(args)[0])
     if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
