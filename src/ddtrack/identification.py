@@ -157,10 +157,9 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
     NMSE is the same bits alone and in any batch (a reduce kernel's order followed the batch: ``_ordered.py``)."""
     predictions = jax.vmap(lambda zi: forward(emulator.mlp, zi / emulator.scales.inputs)[0])(z)
     predictions = predictions * emulator.scales.outputs
-    mean = jax.vmap(total, in_axes=1)  # per channel: mean(x)[j] = sum_i x[i, j] / n
     n = targets.shape[0]
-    variance = mean((targets - mean(targets) / n) ** 2) / n
-    return mean((predictions - targets) ** 2) / n / variance
+    mean = lambda x: jax.vmap(total, in_axes=1)(x) / n  # noqa: E731  # per channel: sum_i x[i, j] / n
+    return mean((predictions - targets) ** 2) / mean((targets - mean(targets)) ** 2)
 
 
 # one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 90 small

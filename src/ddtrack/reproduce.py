@@ -63,8 +63,8 @@ class CaseResult:
 def run_case(
     name: str, seeds: int, variants: dict[str, list[str]], progress: Callable[[str], None] = lambda _: None
 ) -> CaseResult:
-    """Run every variant of one case for seeds 0..seeds-1, each variant as one batch over the seeds (a batch's row
-    is its single run, bit for bit: ``ddtrack.runner.run_batch``)."""
+    """Run every variant of one case for seeds 0..seeds-1, each variant as one batch over the seeds (a row of a batch
+    below 16 runs is its single run, bit for bit: ``ddtrack.runner.run_batch``, docs/reliability.md)."""
     path = scenario_path(name)
     scenarios = {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
     result = CaseResult(scenario=scenarios["backstepping"])
