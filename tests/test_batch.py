@@ -159,7 +159,9 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     with two devices must give the rows this one-device process gives, for backstepping and for the NN-adaptive
     law, whose emulators one program partitioned over the two devices trained differently in the last
     bits (with a 5 s, 5-epoch identification as with the paper's 60 s and 100; not with 2 epochs). Both the
-    identification and the simulation are split."""
+    identification and the simulation are split. The first batch runs in a ``with jax.enable_x64(True):`` block
+    instead of ``ddtrack.enable_float64()``: the threads that compute the shares take the caller's float64 (they
+    ran in float32, and ``simulate`` refused them, before ``on_each_device`` passed the setting on)."""
     nn = [
         "controller.kind=nn_adaptive_backstepping",
         "simulation.duration=3",
@@ -169,11 +171,13 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     ]
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nddtrack.enable_float64()\nfrom ddtrack.runner import monte_carlo, on_each_device\n"
+        "import ddtrack\nfrom ddtrack.runner import monte_carlo, on_each_device\n"
         "seen = set()\non_each_device(lambda x: seen.update(x.devices()) or x, jax.numpy.zeros(4))\n"
         "assert len(jax.devices()) == 2 and len(seen) == 2\n"  # the chunk is split: a share on each device
-        f"scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
-        "print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
+        "with jax.enable_x64(True):\n"  # float64 in this thread only
+        f"    scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
+        "    print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
+        "ddtrack.enable_float64()\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per device: left unsplit
         f"nn = ddtrack.load_scenario({str(SCENARIOS / 'paper_line.toml')!r}, overrides={nn!r})\n"
         "import ddtrack.runner as runner\nsplit, split_runs = [], runner.on_each_device\n"

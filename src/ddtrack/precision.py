@@ -9,6 +9,10 @@ constructor says so); and every entry point that simulates calls :func:`require_
 
 from __future__ import annotations
 
+import importlib
+from contextlib import AbstractContextManager
+from typing import cast
+
 from .errors import RunError
 
 
@@ -32,3 +36,15 @@ def require_float64() -> None:
             "ddtrack computes in float64, and JAX is in float32: call ddtrack.enable_float64() once at the start "
             "of your script, before any JAX array is made (the ddtrack command does it for you)"
         )
+
+
+def float64_in_this_thread(enabled: bool) -> AbstractContextManager[object]:
+    """JAX's float64 switch for the current thread only, as a context manager: a thread that ddtrack starts takes
+    its caller's setting through it, since a caller's ``with jax.enable_x64(True):`` block holds only in the
+    caller's thread (``jax.enable_x64``, or ``jax.experimental.enable_x64`` in older JAX)."""
+    import jax
+
+    switch = getattr(jax, "enable_x64", None)  # a context manager since JAX 0.8 or so
+    if switch is None:  # pragma: no cover - older JAX kept it in jax.experimental
+        switch = importlib.import_module("jax.experimental").enable_x64
+    return cast(AbstractContextManager[object], switch(enabled))

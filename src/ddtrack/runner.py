@@ -30,6 +30,7 @@ from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
 from .plausibility import motor_metrics, motor_warnings, traction_columns, traction_warnings
+from .precision import float64_in_this_thread
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import motor_or_none
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
@@ -207,7 +208,8 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
     """``function(*args)`` for a batch of runs (every array's leading axis is the run), the runs split evenly over
     the available devices (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up),
     each device computing its share as a batch of its own, called from a thread of its own while the others compute
-    theirs; the results are joined on the host. Left whole on one device, when the runs do not split evenly, or when
+    theirs (in the caller's float64 setting, a ``with jax.enable_x64(True):`` block included); the results are
+    joined on the host. Left whole on one device, when the runs do not split evenly, or when
     a device would get a single run (computed as a lone run, it would round differently from its row in a batch:
     ``sim.vmap_runs``). Each share runs the program a batch of its size gets on one device, so each row is the bits
     that batch gives it (its single run's, below 16 runs per device: docs/reliability.md); one program partitioned
@@ -218,10 +220,12 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
         return function(*args)
     share = runs // len(devices)
     host = jax.tree_util.tree_map(np.asarray, args)  # cut on the host: a slice in JAX compiles a program per shape
+    float64 = jax.config.read("jax_enable_x64")  # this thread's: `with jax.enable_x64(True):` holds only in it
 
     def compute(i: int) -> Batched:
         rows = slice(i * share, (i + 1) * share)
-        part = function(*jax.device_put(jax.tree_util.tree_map(lambda leaf: leaf[rows], host), devices[i]))
+        with float64_in_this_thread(float64):
+            part = function(*jax.device_put(jax.tree_util.tree_map(lambda leaf: leaf[rows], host), devices[i]))
         return jax.tree_util.tree_map(np.asarray, part)
 
     # a thread per device: called one after another from one thread, the NN identification's shares ran one after
