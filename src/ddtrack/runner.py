@@ -230,8 +230,11 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
 
     # a thread per device: called one after another from one thread, the NN identification's shares ran one after
     # another, no faster than one device (docs/benchmarks.md, "ddtrack mc"); from a thread each, side by side
-    with ThreadPoolExecutor(len(devices)) as pool:
+    pool = ThreadPoolExecutor(len(devices))
+    try:
         parts = list(pool.map(compute, range(len(devices))))
+    finally:  # on Ctrl-C, return at once (the shares still computing end unwatched): waiting held `mc` for seconds
+        pool.shutdown(wait=False, cancel_futures=True)
     return jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *parts)
 
 
