@@ -207,6 +207,7 @@ def test_ctrl_c_returns_without_waiting_for_the_shares_still_computing():
     script = (
         "import jax, signal, threading, time; jax.config.update('jax_num_cpu_devices', 2)\n"
         "from ddtrack.runner import on_each_device\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as in a terminal (a pytest worker ignores it)
         "main, started = threading.main_thread().ident, threading.Barrier(2)\n"
         "release, released = threading.Event(), []\n"
         "def share(x):\n"
