@@ -202,12 +202,13 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
 
 def test_ctrl_c_returns_without_waiting_for_the_shares_still_computing():
     """A Ctrl-C while the devices compute their shares reaches the caller at once: ``ddtrack mc`` said "aborted"
-    only once every share had finished (5 to 11 s into a 50-run NN identification). Each share here waits for the
-    caller to release it; it must see the release, which the old code only gave once the shares had given up."""
+    only once every share had finished (4.8 and 11 s after it, in a 50-run NN identification). Each share here
+    waits for the caller to release it; it must see the release, which the old code only gave once the shares had
+    given up."""
     script = (
         "import jax, signal, threading, time; jax.config.update('jax_num_cpu_devices', 2)\n"
         "from ddtrack.runner import on_each_device\n"
-        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as in a terminal (a pytest worker ignores it)
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as in a terminal; a background job ignores it
         "main, started = threading.main_thread().ident, threading.Barrier(2)\n"
         "release, released = threading.Event(), []\n"
         "def share(x):\n"
