@@ -209,11 +209,11 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
     the available devices (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up),
     each device computing its share as a batch of its own, called from a thread of its own while the others compute
     theirs (in the caller's float64 setting, a ``with jax.enable_x64(True):`` block included); the results are
-    joined on the host. Left whole on one device, when the runs do not split evenly, or when
-    a device would get a single run (computed as a lone run, it would round differently from its row in a batch:
-    ``sim.vmap_runs``). Each share runs the program a batch of its size gets on one device, so each row is the bits
-    that batch gives it (its single run's, below 16 runs per device: docs/reliability.md); one program partitioned
-    over the devices was not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
+    joined on the host. Left whole on one device, when the runs do not split evenly, or when a device would get a
+    single run (computed as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``).
+    Each share runs the program a batch of its size gets on one device, so each row is the bits that batch gives
+    it (its single run's, below 16 runs per device: docs/reliability.md); one program partitioned over the devices
+    was not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
     devices = jax.devices()
     runs = len(jax.tree_util.tree_leaves(args)[0])
     if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
