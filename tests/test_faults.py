@@ -27,6 +27,7 @@ from ddtrack.metrics import summarize
 from ddtrack.sim import REMEDIES
 
 SHORT = ["simulation.duration=2", "simulation.metric_window=[0, 2]"]
+UNSTABLE_INNER_LOOP = "the inner loop (computed_torque) is unstable with its torques held over"
 # the columns that hold x_k, ref_k and e_p(x_k, ref_k): finite on every row, the failing one included (the state is
 # frozen at the last finite value); the commands and logs of the failing row may be what made it fail
 STATE_COLUMNS = (
@@ -58,11 +59,14 @@ def strict_json(text: str) -> Any:
     return json.loads(text, parse_constant=reject)
 
 
-def assert_failed_run(out, code: int, stderr: str, status: str, failure_time: float) -> dict:
-    """The checks every failing ``ddtrack run`` must pass; returns the time-series columns."""
+def assert_failed_run(out, code: int, stderr: str, status: str, failure_time: float, cause: str = "") -> dict:
+    """The checks every failing ``ddtrack run`` must pass; returns the time-series columns. ``cause``: the start of
+    the remedy the run names (default: the status's generic one)."""
     assert code == 1, stderr
-    line = f"run {status} at t = {failure_time:.2f} s: {REMEDIES[status]}"
-    assert stderr.strip() == line, stderr  # one line: status, time, remedy; no traceback
+    line = f"run {status} at t = {failure_time:.2f} s: {cause or REMEDIES[status]}"
+    assert len(stderr.strip().splitlines()) == 1 and stderr.startswith(line), (
+        stderr
+    )  # status, time, remedy; no traceback
     metrics = strict_json((out / "metrics.json").read_text())
     assert metrics["status"] == status
     assert metrics["failure_time"] == pytest.approx(failure_time, abs=1e-12)
@@ -94,7 +98,7 @@ def test_unstable_inner_loop_diverges(tmp_path, cli):
     """K_c = 1000 /s with T_c = 10 ms (K_c T_c = 10 >> 2: the sampled computed-torque loop is unstable) and no torque
     limit to hide it: the speed runs away within a few periods."""
     out, code, stderr = run_cli(cli, tmp_path, "controller.kc=[1000, 1000]", "robot.max_torque=1e6")
-    assert_failed_run(out, code, stderr, "diverged", 0.02)
+    assert_failed_run(out, code, stderr, "diverged", 0.02, UNSTABLE_INNER_LOOP)  # named as the cause
 
 
 def test_unstable_gains_that_overflow_are_non_finite(tmp_path, cli):
@@ -102,7 +106,7 @@ def test_unstable_gains_that_overflow_are_non_finite(tmp_path, cli):
     out, code, stderr = run_cli(
         cli, tmp_path, "controller.kc=[1e8, 1e8]", "robot.max_torque=1e300", "simulation.divergence_error=1e300"
     )
-    columns = assert_failed_run(out, code, stderr, "non_finite", 0.0)
+    columns = assert_failed_run(out, code, stderr, "non_finite", 0.0, UNSTABLE_INNER_LOOP)
     assert abs(columns["tau_r"][-1]) > 1e6  # the recorded torque is finite, but x_1 under it overflowed
 
 

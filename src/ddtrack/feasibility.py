@@ -6,7 +6,8 @@ for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a rob
 masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams), and an
 open-loop plan beyond the top speed or yaw rate of the ``robot.preset``. It returns
 warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp or beyond the top speed or yaw rate
-of the ``robot.preset``, and what loading the trajectory changed (repeated waypoints dropped).
+of the ``robot.preset``, an inner loop that the control period makes unstable, and what loading the trajectory
+changed (repeated waypoints dropped).
 """
 
 from __future__ import annotations
@@ -179,6 +180,84 @@ def check_units(scenario: Any) -> None:
             )
 
 
+def sampled_growth(rate: float, derivative: float, period: float) -> float:
+    """How many times a velocity error grows per period in an inner loop of ``rate`` k [1/s] whose torque is held
+    over ``period`` T [s], with ``derivative`` a = k K_D / K_P for the wheel PD's backward difference (0 for computed
+    torque): the spectral radius of e_{k+1} = (1 - T k - a) e_k + a e_{k-1} (model.md §2.7). Below 1 the loop is
+    stable, which holds when a < 1 and T k < 2 (1 - a)."""
+    roots = np.roots([1.0, -(1.0 - period * rate - derivative), -derivative])
+    return float(np.max(np.abs(roots)))
+
+
+def inner_loop_channels(scenario: Any) -> list[tuple[str, float, float, float]]:
+    """The inner loop's two channels on the true robot, ``(name, k, a, c)``: the rate k [1/s] at which the
+    velocity error decays in continuous time, the PD's derivative coefficient a, and c, the rate per unit of
+    the field named in :func:`check_sampled_inner_loop` (k = c K_c_i for computed torque, k = c K_P for the
+    PD); [] for a controller without the shared inner loop (model.md §2.5-2.7)."""
+    controller = scenario.controller
+    if getattr(controller, "inner", "none") == "none" or not hasattr(controller, "inner_bandwidth"):
+        return []
+    nominal, true = scenario.robot.params(), scenario.plant_params()
+    # S^T B of the true robot against the nominal wheel geometry the controller inverts: both are diagonal
+    forward = nominal.wheel_radius / true.wheel_radius
+    turning = forward * true.half_axle / nominal.half_axle
+    masses = (true.effective_mass, true.effective_inertia_axle)
+    if controller.inner == "computed_torque":  # nu_dot = M^-1 B_bar B_hat^-1 M_hat K_c e
+        nominal_masses = (nominal.effective_mass, nominal.effective_inertia_axle)
+        per_gain = [g * m_hat / m for g, m_hat, m in zip((forward, turning), nominal_masses, masses, strict=True)]
+        return [(name, c * kc, 0.0, c) for name, c, kc in zip(("v", "omega"), per_gain, controller.kc, strict=True)]
+    # wheel PD: tau = K_P W_hat e + K_D W_hat (e_k - e_{k-1}) / T, nu_dot = M^-1 B_bar tau
+    scale = 2.0 / (true.wheel_radius * nominal.wheel_radius)
+    per_gain = [scale / masses[0], scale * true.half_axle * nominal.half_axle / masses[1]]
+    return [(name, c * controller.kp, c * controller.kd, c) for name, c in zip(("v", "omega"), per_gain, strict=True)]
+
+
+def check_sampled_inner_loop(scenario: Any) -> list[dict]:
+    """Warn when the inner velocity loop, its torque held over each control period, is unstable on the true robot:
+    every run then diverges, whatever the gains of the law above it (a 4 Hz loop on a Burger with K_c = 10 1/s
+    diverged in 2.5 s, and the remedy named the gains)."""
+    period = scenario.simulation.control_period
+    unstable = [
+        (name, rate, derivative, per_gain)
+        for name, rate, derivative, per_gain in inner_loop_channels(scenario)
+        if sampled_growth(rate, derivative, period) >= 1.0
+    ]
+    if not unstable:
+        return []
+    controller = scenario.controller
+    channels = inner_loop_channels(scenario)
+    causes = [
+        f"its {name} channel's velocity error (rate {k:.3g} 1/s on the true robot) grows "
+        f"{sampled_growth(k, a, period):.3g}-fold per period"
+        for name, k, a, _ in unstable
+    ]
+    # each advised at half its stability limit, on every channel (T k <= 1 - a): a channel near its limit decays so
+    # slowly that the cascade still diverged (a Burger at T_c = 0.25 s with K_c = [4.8, 10] 1/s; [4.8, 5.16] tracked)
+    fixes = []
+    if all(a < 1.0 for _, _, a, _ in unstable):
+        fixes.append(f"simulation.control_period to {min((1 - a) / k for _, k, a, _ in channels):.3g} s or less")
+    if controller.inner == "computed_torque":  # one gain per channel, and no derivative
+        advised = [min(kc, 1.0 / (period * c)) for kc, (*_, c) in zip(controller.kc, channels, strict=True)]
+        fixes.append(f"controller.kc to [{advised[0]:.3g}, {advised[1]:.3g}] 1/s or less")
+    elif all(a < 1.0 for _, _, a, _ in channels):
+        fixes.append(f"controller.kp to {min((1 - a) / (period * c) for _, _, a, c in channels):.3g} N m s/rad or less")
+    else:  # the PD's derivative alone destabilises a channel, at any period: a = c K_D < 1 is needed
+        fixes.append(
+            f"controller.kd to {min(0.5 / c for *_, c in channels):.3g} N m s^2/rad or less, then validate again"
+        )
+    return [
+        {
+            "code": "sampled_inner_loop_unstable",
+            "message": (
+                f"the inner loop ({controller.inner}) is unstable with its torques held over "
+                f"simulation.control_period = {period:g} s: {'; '.join(causes)} until the torque limit "
+                f"bounds it (the run diverges or runs saturated); set {', or '.join(fixes)} (half the stability limit, "
+                "on each channel: a loop near its limit decays too slowly)"
+            ),
+        }
+    ]
+
+
 def check(scenario: Any) -> list[dict]:
     """Run every check on a validated scenario; return the warnings (raise :class:`ConfigError` on a refusal)."""
     check_angles(scenario)
@@ -186,4 +265,9 @@ def check(scenario: Any) -> list[dict]:
     check_open_loop(scenario)
     peaks = reference_peaks(scenario)
     loading = list(getattr(scenario.trajectory, "load_warnings", []))  # e.g. repeated waypoints dropped
-    return [*loading, *check_clamps(scenario, peaks), *check_robot_limits(scenario, peaks)]
+    return [
+        *loading,
+        *check_clamps(scenario, peaks),
+        *check_robot_limits(scenario, peaks),
+        *check_sampled_inner_loop(scenario),
+    ]

@@ -369,7 +369,11 @@ def run_metrics(
     if motor is not None:  # a preset's datasheet motor: what the run asked of it, before the warnings
         metrics = {key: value for key, value in metrics.items() if key != "warnings"}
         metrics |= motor_metrics(motor, columns, sim.control_period)
-    metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse) if status == "ok" else []
+    # a failed run's series say nothing about grip or adaptation; what loading found (e.g. an unstable sampled
+    # inner loop) still holds, and names the cause
+    metrics["warnings"] = (
+        run_warnings(scenario, columns, metrics, nmse) if status == "ok" else feasibility.check(scenario)
+    )
     return metrics
 
 

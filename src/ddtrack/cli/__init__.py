@@ -98,10 +98,11 @@ def run(
         f"{sim.duration:g} s -> {folder}"
     )
     if result.status_name != "ok":
-        click.echo(
-            f"run {result.status_name} at t = {result.failure_time:.2f} s: {remedy(result.status_name, columns)}",
-            err=True,
-        )
+        cause = remedy(result.status_name, columns, metrics["warnings"])
+        for warning in metrics["warnings"]:  # the others: the remedy already says the one it names
+            if warning["message"] != cause:
+                click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
+        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {cause}", err=True)
         return 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
     settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant

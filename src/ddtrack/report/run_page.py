@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..plotting import ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt
-from ..sim import REMEDIES
+from ..sim import remedy
 from ._page import (
     GAIN_NAMES,
     KINDS,
@@ -113,8 +113,8 @@ def _run_page(folder: Path) -> dict:
     notes = []
     if status != "ok":
         when = f" at t = {fmt(metrics['failure_time'])} s" if "failure_time" in metrics else ""
-        remedy = f" To try: {REMEDIES[status]}." if REMEDIES.get(status) else ""
-        notes.append(f"The run stopped{when}: {status}.{remedy}")
+        advice = remedy(status, columns, metrics.get("warnings", []))  # what ddtrack run printed
+        notes.append(f"The run stopped{when}: {status}.{f' To try: {advice}.' if advice else ''}")
     sections = [
         Section(
             "metrics",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -19,10 +20,15 @@ REMEDIES = {
 }
 
 
-def remedy(status: str, columns: dict) -> str:
-    """What to try after a failed run, naming its likely cause from the run's own record (``columns``, the
-    :func:`timeseries` up to the failure): a run that spent most of its time against the torque limit or a clamp
-    failed because the robot could not do what was asked, not because of its gains."""
+def remedy(status: str, columns: dict, warnings: Sequence[dict] = ()) -> str:
+    """What to try after a failed run, naming its likely cause: an inner loop that the scenario's control period
+    makes unstable (its ``sampled_inner_loop_unstable`` warning, from ``metrics.json``'s ``warnings``), else from the
+    run's own record (``columns``, the :func:`timeseries` up to the failure): a run that spent most of its time
+    against the torque limit or a clamp failed because the robot could not do what was asked, not because of its
+    gains."""
+    for warning in warnings:
+        if status != "ok" and warning.get("code") == "sampled_inner_loop_unstable":
+            return str(warning["message"])
     saturated = columns.get("saturated")  # absent for a controller that logs no saturation
     # over at least 20 periods: a run that fails at once says nothing by its saturation
     if status == "diverged" and saturated is not None and len(saturated) >= 20 and np.mean(saturated > 0.5) >= 0.5:
