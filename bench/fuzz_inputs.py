@@ -806,7 +806,8 @@ def judge(m: Mutant, folder: Path, *, sweep: bool = False, run: bool = False) ->
         return ("bad", f"{problem} [{m.note}]") if problem else ("refused", err.splitlines()[0])
     overrides = [a for o in m.overrides for a in ("--set", o)]
     code, out, err = call(["validate", str(path), *overrides])
-    if code == 0 and not err and out.startswith("ok: "):
+    warned_only = all(line.startswith("warning: ") for line in err.splitlines())  # accepted, with a warning
+    if code == 0 and warned_only and out.startswith("ok: "):
         if not run:
             return "ran", "validated"
         short = (

@@ -197,7 +197,15 @@ def inner_loop_channels(scenario: Any) -> list[tuple[str, float, float, float]]:
     controller = scenario.controller
     if getattr(controller, "inner", "none") == "none" or not hasattr(controller, "inner_bandwidth"):
         return []
-    nominal, true = scenario.robot.params(), scenario.plant_params()
+    try:
+        channels = _inner_loop_channels(controller, scenario.robot.params(), scenario.plant_params())
+    except (ZeroDivisionError, OverflowError):  # a robot too extreme for floating point has no rate to judge
+        return []
+    judged = all(math.isfinite(k) and math.isfinite(a) and 0.0 < c < math.inf for _, k, a, c in channels)
+    return channels if judged else []
+
+
+def _inner_loop_channels(controller: Any, nominal: Any, true: Any) -> list[tuple[str, float, float, float]]:
     # S^T B of the true robot against the nominal wheel geometry the controller inverts: both are diagonal
     forward = nominal.wheel_radius / true.wheel_radius
     turning = forward * true.half_axle / nominal.half_axle
