@@ -222,18 +222,14 @@ def _inner_loop_channels(controller: Any, nominal: Any, true: Any) -> list[tuple
 
 def check_sampled_inner_loop(scenario: Any) -> list[dict]:
     """Warn when the inner velocity loop, its torque held over each control period, is unstable on the true robot:
-    every run then diverges, whatever the gains of the law above it (a 4 Hz loop on a Burger with K_c = 10 1/s
-    diverged in 2.5 s, and the remedy named the gains)."""
+    a run then diverges or runs saturated, whatever the gains of the law above it (a 4 Hz loop on a Burger with
+    K_c = 10 1/s diverged in 2.5 s, and the remedy named the gains)."""
     period = scenario.simulation.control_period
-    unstable = [
-        (name, rate, derivative, per_gain)
-        for name, rate, derivative, per_gain in inner_loop_channels(scenario)
-        if sampled_growth(rate, derivative, period) >= 1.0
-    ]
+    channels = inner_loop_channels(scenario)
+    unstable = [(name, k, a, c) for name, k, a, c in channels if sampled_growth(k, a, period) >= 1.0]
     if not unstable:
         return []
     controller = scenario.controller
-    channels = inner_loop_channels(scenario)
     causes = [
         f"its {name} channel's velocity error (rate {k:.3g} 1/s on the true robot) grows "
         f"{sampled_growth(k, a, period):.3g}-fold per period"
