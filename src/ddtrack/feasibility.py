@@ -206,18 +206,23 @@ def inner_loop_channels(scenario: Any) -> list[tuple[str, float, float, float]]:
 
 
 def _inner_loop_channels(controller: Any, nominal: Any, true: Any) -> list[tuple[str, float, float, float]]:
-    # S^T B of the true robot against the nominal wheel geometry the controller inverts: both are diagonal
+    # the loop's bandwidth on the nominal model, scaled to the true robot: its torques, computed for M_hat and
+    # B_hat, act through M^-1 B_bar (both diagonal), i.e. times m_hat / m and R_hat / R, and L / L_hat for the yaw
+    design = controller.inner_bandwidth(nominal)
     forward = nominal.wheel_radius / true.wheel_radius
-    turning = forward * true.half_axle / nominal.half_axle
-    masses = (true.effective_mass, true.effective_inertia_axle)
-    if controller.inner == "computed_torque":  # nu_dot = M^-1 B_bar B_hat^-1 M_hat K_c e
-        nominal_masses = (nominal.effective_mass, nominal.effective_inertia_axle)
-        per_gain = [g * m_hat / m for g, m_hat, m in zip((forward, turning), nominal_masses, masses, strict=True)]
-        return [(name, c * kc, 0.0, c) for name, c, kc in zip(("v", "omega"), per_gain, controller.kc, strict=True)]
-    # wheel PD: tau = K_P W_hat e + K_D W_hat (e_k - e_{k-1}) / T, nu_dot = M^-1 B_bar tau
-    scale = 2.0 / (true.wheel_radius * nominal.wheel_radius)
-    per_gain = [scale / masses[0], scale * true.half_axle * nominal.half_axle / masses[1]]
-    return [(name, c * controller.kp, c * controller.kd, c) for name, c in zip(("v", "omega"), per_gain, strict=True)]
+    geometry = (forward, forward * true.half_axle / nominal.half_axle)
+    masses = (
+        nominal.effective_mass / true.effective_mass,
+        nominal.effective_inertia_axle / true.effective_inertia_axle,
+    )
+    rates = [k * g * m for k, g, m in zip(design, geometry, masses, strict=True)]
+    if controller.inner == "computed_torque":  # k = c K_c per channel, no derivative
+        return [(name, k, 0.0, k / kc) for name, k, kc in zip(("v", "omega"), rates, controller.kc, strict=True)]
+    # wheel PD: k = c K_P, and its backward difference K_D (e_k - e_{k-1}) / T adds a = c K_D
+    return [
+        (name, k, k * controller.kd / controller.kp, k / controller.kp)
+        for name, k in zip(("v", "omega"), rates, strict=True)
+    ]
 
 
 def check_sampled_inner_loop(scenario: Any) -> list[dict]:

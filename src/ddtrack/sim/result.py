@@ -26,9 +26,9 @@ def remedy(status: str, columns: dict, warnings: Sequence[dict] = ()) -> str:
     run's own record (``columns``, the :func:`timeseries` up to the failure): a run that spent most of its time
     against the torque limit or a clamp failed because the robot could not do what was asked, not because of its
     gains."""
-    for warning in warnings:
-        if status != "ok" and warning.get("code") == "sampled_inner_loop_unstable":
-            return str(warning["message"])
+    named = [warning["message"] for warning in warnings if warning.get("code") == "sampled_inner_loop_unstable"]
+    if status != "ok" and named:
+        return str(named[0])
     saturated = columns.get("saturated")  # absent for a controller that logs no saturation
     # over at least 20 periods: a run that fails at once says nothing by its saturation
     if status == "diverged" and saturated is not None and len(saturated) >= 20 and np.mean(saturated > 0.5) >= 0.5:
