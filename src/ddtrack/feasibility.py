@@ -6,8 +6,8 @@ for at least the controller's clamp on speed or yaw rate (a 1 m/s line for a rob
 masses and inertias whose radius of gyration cannot belong to a robot of that size (a mass in grams), and an
 open-loop plan beyond the top speed or yaw rate of the ``robot.preset``. It returns
 warnings, each ``{"code", "message"}``, for a reference within 10 % of a clamp or beyond the top speed or yaw rate
-of the ``robot.preset``, an inner loop that the control period makes unstable, and what loading the trajectory
-changed (repeated waypoints dropped).
+of the ``robot.preset``, an inner loop that the control period makes unstable (or a sliding-mode boundary layer it
+makes chatter), and what loading the trajectory changed (repeated waypoints dropped).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from functools import cache
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -189,82 +189,158 @@ def sampled_growth(rate: float, derivative: float, period: float) -> float:
     return float(np.max(np.abs(roots)))
 
 
-def inner_loop_channels(scenario: Any) -> list[tuple[str, float, float, float]]:
-    """The inner loop's two channels on the true robot, ``(name, k, a, c)``: the rate k [1/s] at which the
-    velocity error decays in continuous time, the PD's derivative coefficient a, and c, the rate per unit of
-    the field named in :func:`check_sampled_inner_loop` (k = c K_c_i for computed torque, k = c K_P for the
-    PD); [] for a controller without the shared inner loop (model.md §2.5-2.7)."""
+class Channel(NamedTuple):
+    """One channel of a held inner loop on the true robot (model.md §2.7), rates in 1/s."""
+
+    name: str  #: "v" or "omega"
+    rate: float  #: k: the velocity error's decay rate in continuous time, the outer law's share included
+    derivative: float  #: a: the wheel PD's backward-difference coefficient (0 for the other loops)
+    per_gain: float  #: the rate per unit of the loop's gain (K_c of this channel, or K_P)
+    feedback: float  #: the outer law's share of ``rate``: its nu_c_dot feeding back the measured velocity
+    layer: float  #: the sliding term's share of the rate inside its boundary layer (0 for the other loops)
+
+
+def inner_loop_channels(scenario: Any) -> list[Channel]:
+    """The held inner loop's two channels on the true robot; [] for a controller without one (its config has no
+    ``held_loop``, or inner = "none") or a robot too extreme for floating point (model.md §2.5-2.7)."""
+    return _held_loop(scenario)[1]
+
+
+def _held_loop(scenario: Any) -> tuple[str, list[Channel]]:
     controller = scenario.controller
-    if getattr(controller, "inner", "none") == "none" or not hasattr(controller, "inner_bandwidth"):
-        return []
+    if not hasattr(controller, "held_loop"):
+        return "", []
+    peak_speed = reference_peaks(scenario)[0]
+    loop = controller.held_loop(scenario.robot.params(), peak_speed, scenario.simulation.control_period)
+    if loop is None:
+        return "", []
     try:
-        channels = _inner_loop_channels(controller, scenario.robot.params(), scenario.plant_params())
+        channels = _channels(loop, scenario.robot.params(), scenario.plant_params())
     except (ZeroDivisionError, OverflowError):  # a robot too extreme for floating point has no rate to judge
-        return []
-    judged = all(math.isfinite(k) and math.isfinite(a) and 0.0 < c < math.inf for _, k, a, c in channels)
-    return channels if judged else []
-
-
-def _inner_loop_channels(controller: Any, nominal: Any, true: Any) -> list[tuple[str, float, float, float]]:
-    # the loop's bandwidth on the nominal model, scaled to the true robot: its torques, computed for M_hat and
-    # B_hat, act through M^-1 B_bar (both diagonal), i.e. times m_hat / m and R_hat / R, and L / L_hat for the yaw
-    design = controller.inner_bandwidth(nominal)
-    forward = nominal.wheel_radius / true.wheel_radius
-    geometry = (forward, forward * true.half_axle / nominal.half_axle)
-    masses = (
-        nominal.effective_mass / true.effective_mass,
-        nominal.effective_inertia_axle / true.effective_inertia_axle,
+        return "", []
+    judged = all(
+        math.isfinite(c.rate) and math.isfinite(c.derivative) and 0.0 < c.per_gain < math.inf for c in channels
     )
-    rates = [k * g * m for k, g, m in zip(design, geometry, masses, strict=True)]
-    if controller.inner == "computed_torque":  # k = c K_c per channel, no derivative
-        return [(name, k, 0.0, k / kc) for name, k, kc in zip(("v", "omega"), rates, controller.kc, strict=True)]
-    # wheel PD: k = c K_P, and its backward difference K_D (e_k - e_{k-1}) / T adds a = c K_D
-    return [
-        (name, k, k * controller.kd / controller.kp, k / controller.kp)
-        for name, k in zip(("v", "omega"), rates, strict=True)
-    ]
+    return (loop.kind, channels) if judged else ("", [])
+
+
+def _channels(loop: Any, nominal: Any, true: Any) -> list[Channel]:
+    # the loop acts through the nominal model's M_hat and B_hat, i.e. on the true robot times m_hat / m and R_hat / R,
+    # and L / L_hat for the yaw: c per channel
+    forward = nominal.wheel_radius / true.wheel_radius
+    scales = (
+        forward * nominal.effective_mass / true.effective_mass,
+        forward * true.half_axle / nominal.half_axle * nominal.effective_inertia_axle / true.effective_inertia_axle,
+    )
+    channels = []
+    for i, (name, c) in enumerate(zip(("v", "omega"), scales, strict=True)):
+        feedback = c * loop.feedforward[i] * loop.feedback[i]
+        rate = c * loop.design[i] + feedback
+        channels.append(
+            Channel(name, rate, c * loop.derivative[i], c * loop.design[i] / loop.gain[i], feedback, c * loop.layer[i])
+        )
+    return channels
+
+
+def _limit(channel: Channel, period: float) -> float:
+    """The largest value of the loop's gain (K_c of the channel, or K_P) at half the channel's stability limit,
+    T k <= 1 - a (model.md §2.7); the outer law's share stays."""
+    return ((1.0 - channel.derivative) / period - channel.feedback) / channel.per_gain
 
 
 def check_sampled_inner_loop(scenario: Any) -> list[dict]:
-    """Warn when the inner velocity loop, its torque held over each control period, is unstable on the true robot:
-    a run then diverges or runs saturated, whatever the gains of the law above it (a 4 Hz loop on a Burger with
-    K_c = 10 1/s diverged in 2.5 s, and the remedy named the gains)."""
+    """Warn when the inner velocity loop, its torque held over each control period, is unstable on the true robot
+    (a run then diverges, or runs saturated, whatever the gains of the law above it: a 4 Hz loop on a Burger with
+    K_c = 10 1/s diverged in 2.5 s, and the remedy named the gains), or, for sliding mode, when it is stable but
+    its boundary layer is not (the torque then flips sign every period: a 20 Hz Burger chattered, reported fine)."""
     period = scenario.simulation.control_period
-    channels = inner_loop_channels(scenario)
-    unstable = [(name, k, a, c) for name, k, a, c in channels if sampled_growth(k, a, period) >= 1.0]
-    if not unstable:
-        return []
+    kind, channels = _held_loop(scenario)
+    unstable = [c for c in channels if sampled_growth(c.rate, c.derivative, period) >= 1.0]
+    if unstable:
+        return [_unstable(scenario, kind, channels, unstable)]
+    chattering = [c for c in channels if c.layer and sampled_growth(c.rate + c.layer, 0.0, period) >= 1.0]
+    return [_chattering(scenario, channels, chattering)] if chattering else []
+
+
+def _growth(rate: float, derivative: float, period: float) -> str:
+    growth = sampled_growth(rate, derivative, period)
+    return f"grows {growth:.3g}-fold per period" if growth >= 1.005 else "does not decay (at the stability limit)"
+
+
+def _rate(channel: Channel, rate: float) -> str:
+    outer = f", {channel.feedback:.3g} 1/s of it from the outer law's command rate" if channel.feedback else ""
+    return f"rate {rate:.3g} 1/s on the true robot{outer}"
+
+
+def _unstable(scenario: Any, kind: str, channels: list[Channel], unstable: list[Channel]) -> dict:
+    period = scenario.simulation.control_period
     controller = scenario.controller
     causes = [
-        f"its {name} channel's velocity error (rate {k:.3g} 1/s on the true robot) grows "
-        f"{sampled_growth(k, a, period):.3g}-fold per period"
-        for name, k, a, _ in unstable
+        f"its {c.name} channel's velocity error ({_rate(c, c.rate)}) {_growth(c.rate, c.derivative, period)}"
+        for c in unstable
     ]
-    # each advised at half its stability limit, on every channel (T k <= 1 - a): a channel near its limit decays so
-    # slowly that the cascade still diverged (a Burger at T_c = 0.25 s with K_c = [4.8, 10] 1/s; [4.8, 5.16] tracked)
+    # advised at half the stability limit on every channel (T k <= 1 - a), as the linearisation holds only near the
+    # reference; without a derivative the error then also decays without flipping sign each period
     fixes = []
-    if all(a < 1.0 for _, _, a, _ in unstable):
-        fixes.append(f"simulation.control_period to {min((1 - a) / k for _, k, a, _ in channels):.3g} s or less")
-    if controller.inner == "computed_torque":  # one gain per channel, and no derivative
-        advised = [min(kc, 1.0 / (period * c)) for kc, (*_, c) in zip(controller.kc, channels, strict=True)]
+    if all(c.derivative < 1.0 for c in channels):
+        fixes.append(f"simulation.control_period to {min((1 - c.derivative) / c.rate for c in channels):.3g} s or less")
+    limits = [_limit(c, period) for c in channels]
+    if kind == "pd" and any(c.derivative >= 1.0 for c in channels):  # the PD's derivative alone, at any period
+        per_kd = [c.derivative / controller.kd for c in channels]
+        fixes.append(f"controller.kd to {min(0.5 / d for d in per_kd):.3g} N m s^2/rad or less, then validate again")
+    elif kind == "pd" and min(limits) > 0.0:
+        fixes.append(f"controller.kp to {min(limits):.3g} N m s/rad or less")
+    elif kind != "pd" and all(limit > 0.0 for limit in limits):  # one K_c per channel
+        advised = [min(kc, limit) for kc, limit in zip(controller.kc, limits, strict=True)]
         fixes.append(f"controller.kc to [{advised[0]:.3g}, {advised[1]:.3g}] 1/s or less")
-    elif all(a < 1.0 for _, _, a, _ in channels):
-        fixes.append(f"controller.kp to {min((1 - a) / (period * c) for _, _, a, c in channels):.3g} N m s/rad or less")
-    else:  # the PD's derivative alone destabilises a channel, at any period: a = c K_D < 1 is needed
-        fixes.append(
-            f"controller.kd to {min(0.5 / c for *_, c in channels):.3g} N m s^2/rad or less, then validate again"
-        )
-    return [
-        {
-            "code": "sampled_inner_loop_unstable",
-            "message": (
-                f"the inner loop ({controller.inner}) is unstable with its torques held over "
-                f"simulation.control_period = {period:g} s: {'; '.join(causes)} until the torque limit "
-                f"bounds it (the run diverges or runs saturated); set {', or '.join(fixes)} (half the stability limit, "
-                "on each channel: a loop near its limit decays too slowly)"
-            ),
-        }
+    elif kind != "pd" and hasattr(controller, "gains"):  # Kanayama's law alone, through nu_c_dot, is too fast
+        fixes.append("lower controller.gains")
+    return {
+        "code": "sampled_inner_loop_unstable",
+        "message": (
+            f"the inner loop ({kind}) is unstable with its torques held over "
+            f"simulation.control_period = {period:g} s: {'; '.join(causes)} until the torque limit "
+            f"bounds it (the run diverges or runs saturated); set {', or '.join(fixes)} (half the stability limit "
+            "on each channel, for a margin)"
+        ),
+    }
+
+
+def stable_boundary_layer(scenario: Any) -> tuple[float, float] | None:
+    """The sliding-mode boundary layer phi [m/s, rad/s] at half the stability limit of the held loop inside it,
+    T (k + c K_s / phi) <= 1 on each channel, and never narrower than the scenario's (model.md §2.7); None for a
+    controller without a layer, or where no width is enough (T k >= 1 outside the layer already)."""
+    period = scenario.simulation.control_period
+    channels = inner_loop_channels(scenario)
+    if not any(c.layer for c in channels) or any(c.rate * period >= 1.0 for c in channels):
+        return None
+    phi = scenario.controller.boundary_layer
+    width = [
+        p if not c.layer else max(p, p * c.layer / (1.0 / period - c.rate)) for p, c in zip(phi, channels, strict=True)
     ]
+    return (width[0], width[1])
+
+
+def _chattering(scenario: Any, channels: list[Channel], chattering: list[Channel]) -> dict:
+    period = scenario.simulation.control_period
+    causes = [
+        f"its {c.name} channel's velocity error inside the layer ({_rate(c, c.rate + c.layer)}) "
+        f"{_growth(c.rate + c.layer, 0.0, period)}"
+        for c in chattering
+    ]
+    fixes = [f"simulation.control_period to {min(1.0 / (c.rate + c.layer) for c in channels):.3g} s or less"]
+    width = stable_boundary_layer(scenario)
+    if width is not None:
+        fixes.append(f"controller.boundary_layer to [{width[0]:.3g}, {width[1]:.3g}] or wider")
+    return {
+        "code": "sampled_inner_loop_chatters",
+        "message": (
+            f"the sliding-mode loop's boundary layer is unstable with its torques held over "
+            f"simulation.control_period = {period:g} s: {'; '.join(causes)}, so the torque flips sign every period "
+            f"(chattering, which the layer is there to prevent); set {', or '.join(fixes)} (half the stability "
+            "limit on each channel, for a margin)"
+        ),
+    }
 
 
 def check(scenario: Any) -> list[dict]:

@@ -12,7 +12,7 @@ from .backstepping import (
 )
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw, VelocityOutput
 from .dither import Dithered
-from .inner import ComputedTorque, WheelPD
+from .inner import ComputedTorque, HeldLoop, WheelPD
 from .nn import MLP, Scales, init_mlp
 from .nn_adaptive import (
     AdaptiveMemory,
@@ -38,6 +38,7 @@ __all__ = [
     "Controller",
     "Dithered",
     "Emulator",
+    "HeldLoop",
     "Logs",
     "NNAdaptiveBackstepping",
     "Replay",

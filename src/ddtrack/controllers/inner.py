@@ -5,6 +5,8 @@ Both saturate at the nominal ``max_torque`` and report whether they did.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax.numpy as jnp
 from jax import Array
 
@@ -13,6 +15,28 @@ from ..layout import velocity
 from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
 from ..trajectories import Reference
 from .base import VelocityCommand
+
+
+class HeldLoop(NamedTuple):
+    """An inner loop as the check of its sampling sees it: linearised at zero tracking error, on the nominal model,
+    per channel (v, omega), rates in 1/s (model.md §2.7).
+
+    ``kind`` names the loop (``"computed_torque"``, ``"adaptive_computed_torque"``, ``"pd"``, ``"sliding_mode"``)
+    and so the gain to advise; ``design`` is its own rate (K_c, or the PD's bandwidth), proportional to ``gain``
+    (K_c of the channel, or K_P); ``derivative`` the PD's design K_D / K_P (0 for the others); ``feedforward`` the
+    weight of nu_c_dot in the commanded acceleration (1 for computed torque, design K_D / K_P for the PD, the top
+    of the estimates' range for the adaptive law); ``feedback`` the outer law's -d nu_c_dot / d nu, the rate at
+    which its analytic command rate feeds the measured velocity back; ``layer`` the sliding term's K_s / phi
+    inside its boundary layer (0 for the others).
+    """
+
+    kind: str
+    design: tuple[float, float]
+    gain: tuple[float, float]
+    derivative: tuple[float, float]
+    feedforward: tuple[float, float]
+    feedback: tuple[float, float]
+    layer: tuple[float, float] = (0.0, 0.0)
 
 
 def _saturate(tau: Array, limit: Array | float) -> tuple[Array, Array]:

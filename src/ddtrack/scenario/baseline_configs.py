@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from collections.abc import Callable
+from functools import cache
+from typing import Annotated, Any, Literal
 
 import jax
 from pydantic import Field, model_validator
@@ -11,6 +13,7 @@ from pydantic import Field, model_validator
 from ..controllers import (
     Backstepping,
     Cascade,
+    HeldLoop,
     VelocityOutput,
 )
 from ..controllers.baselines import (
@@ -32,6 +35,11 @@ from ._base import (
     _Section,
 )
 from .controller_configs import PositiveTriple, _InnerLoopConfig, _KanayamaGains, _VelocityClamps, same_named
+
+
+@cache  # one program for every LQR's gain (its tolerances and period are traced), kept by the persistent cache
+def _lqr_gain() -> Callable[..., Any]:
+    return jax.jit(lambda law, speed: law.gain(speed))
 
 
 class LTVLQRConfig(_VelocityClamps, _InnerLoopConfig):
@@ -66,6 +74,13 @@ class LTVLQRConfig(_VelocityClamps, _InnerLoopConfig):
             )
         return self
 
+    def command_feedback(self, peak_speed: float, control_period: float) -> tuple[float, float]:
+        """-d nu_c_dot / d nu of the law at zero error, at the reference's peak speed: (K[0, 0], K[1, 2]) [1/s] of
+        its gain K(v_r), since nu_c_dot = K e_dot and e_dot = (-v, ., -omega) + ... (model.md §2.3; the gain is
+        block-diagonal, so nothing crosses channels)."""
+        gain = _lqr_gain()(same_named(self, LTVUnicycleLQR, control_period=control_period), peak_speed)
+        return (float(gain[0, 0]), float(gain[1, 2]))
+
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade | VelocityOutput:
         """The controller; ``key`` is unused (nothing is drawn)."""
         outer = same_named(self, LTVUnicycleLQR, control_period=control_period)
@@ -91,6 +106,22 @@ class SlidingModeConfig(_VelocityClamps, _KanayamaGains):
             "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."
         ),
     )
+
+    def held_loop(self, nominal: RobotParams, peak_speed: float, control_period: float) -> HeldLoop:
+        """Computed torque with the switching term, whose K_s / phi adds to K_c inside the boundary layer
+        (model.md §2.7)."""
+        return HeldLoop(
+            "sliding_mode",
+            self.kc,
+            gain=self.kc,
+            derivative=(0.0, 0.0),
+            feedforward=(1.0, 1.0),
+            feedback=self.command_feedback(peak_speed, control_period),
+            layer=(
+                self.switching_gain[0] / self.boundary_layer[0],
+                self.switching_gain[1] / self.boundary_layer[1],
+            ),
+        )
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""
@@ -213,6 +244,19 @@ class AdaptiveBacksteppingConfig(_VelocityClamps, _KanayamaGains):
                 "low < high (the estimates start at the [robot] values); e.g. [0.5, 2.0]",
             )
         return self
+
+    def held_loop(self, nominal: RobotParams, peak_speed: float, control_period: float) -> HeldLoop:
+        """Computed torque whose damping is K_c on the nominal model, and whose feedforward of nu_c_dot weighs up to
+        the top of the estimates' range (they reached it within one period of a 5 Hz Burger; model.md §2.7)."""
+        high = self.estimate_range[1]
+        return HeldLoop(
+            "adaptive_computed_torque",
+            self.kc,
+            gain=self.kc,
+            derivative=(0.0, 0.0),
+            feedforward=(high, high),
+            feedback=self.command_feedback(peak_speed, control_period),
+        )
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""

@@ -20,6 +20,7 @@ from ..controllers import (
     Cascade,
     ComputedTorque,
     Emulator,
+    HeldLoop,
     NNAdaptiveBackstepping,
     VelocityOutput,
     WheelPD,
@@ -53,6 +54,13 @@ class _KanayamaGains(_ControllerSection):
     gains: tuple[Positive, Positive, Positive] = Field(
         KANAYAMA_GAINS, description="[Kx [1/s], Ky [1/m^2], Ktheta [1/m]] of Kanayama's law (paper eq. 12)."
     )
+
+    def command_feedback(self, peak_speed: float, control_period: float) -> tuple[float, float]:
+        """-d nu_c_dot / d nu of Kanayama's analytic command rate at zero error (model.md §2.5, 2.7): (Kx, v_r
+        Ktheta) [1/s], at the reference's peak speed ``peak_speed`` [m/s]; the rate at which nu_c_dot, computed
+        from the measured velocity, feeds it back through the inner loop."""
+        kx, _, ktheta = self.gains
+        return (kx, peak_speed * ktheta)
 
 
 class _VelocityClamps(_ControllerSection):
@@ -104,6 +112,28 @@ class _InnerLoopConfig(_ControllerSection):
         if self.inner == "none":
             return VelocityOutput(outer)
         return Cascade(outer, self.build_inner(nominal, control_period))
+
+    def command_feedback(self, peak_speed: float, control_period: float) -> tuple[float, float]:
+        """-d nu_c_dot / d nu of the outer law at zero error [1/s]: none for a law whose nu_c_dot does not read the
+        measured velocity (a law that does overrides this; model.md §2.7)."""
+        return (0.0, 0.0)
+
+    def held_loop(self, nominal: RobotParams, peak_speed: float, control_period: float) -> HeldLoop | None:
+        """The inner loop as its sampling check sees it (model.md §2.7); None without one (inner = "none")."""
+        if self.inner == "none":
+            return None
+        design = self.inner_bandwidth(nominal)
+        # the PD's derivative acts on the backward difference and on W nu_c_dot alike, with K_D / K_P of its rate
+        ratio = self.kd / self.kp if self.inner == "pd" else 0.0
+        weight = (design[0] * ratio, design[1] * ratio)
+        return HeldLoop(
+            self.inner,
+            design,
+            gain=self.kc if self.inner == "computed_torque" else (self.kp, self.kp),
+            derivative=weight,
+            feedforward=weight if self.inner == "pd" else (1.0, 1.0),
+            feedback=self.command_feedback(peak_speed, control_period),
+        )
 
     def inner_bandwidth(self, nominal: RobotParams) -> tuple[float, float]:
         """(k_v, k_omega) [1/s] of the inner loop on the nominal model (model.md §2.5, 2.6); inner = "none"
