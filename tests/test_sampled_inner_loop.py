@@ -201,3 +201,32 @@ def test_the_remedy_names_the_unstable_inner_loop_only_for_a_failed_run():
     assert remedy("diverged", {"saturated": np.zeros(100)}, [warning]) == "the inner loop is unstable"
     assert remedy("non_finite", {}, [{"code": "reference_near_limit", "message": "x"}, warning]) == warning["message"]
     assert remedy("ok", {}, [warning]) == ""
+
+
+@pytest.mark.parametrize(
+    ("overrides", "field"),
+    [
+        (["controller.kp=2", "simulation.control_period=0.02", "simulation.substeps=20"], "kp"),
+        (["controller.kd=0.03"], "kd"),
+    ],
+)
+def test_the_wheel_pds_advice_puts_its_binding_channel_at_half_the_limit(overrides, field):
+    """The wheel PD on the paper's line: too stiff a K_P for a 50 Hz loop is advised down to T k = 1 - a on its
+    faster channel; a K_D whose backward difference alone destabilises a channel (a >= 1) is advised down to
+    a = 1/2. Loading the advised value warns no more."""
+    import re
+
+    base = ['controller.inner="pd"', *overrides]
+    scenario = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=base)
+    (warning,) = check_sampled_inner_loop(scenario)
+    unit = "N m s/rad" if field == "kp" else "N m s\\^2/rad"
+    advised = float(re.search(rf"controller\.{field} to ([0-9.e+-]+) {unit} or less", warning["message"]).group(1))
+    fixed = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*base, f"controller.{field}={advised!r}"])
+    assert check_sampled_inner_loop(fixed) == []
+    period = fixed.simulation.control_period
+    channels = inner_loop_channels(fixed)
+    if field == "kp":
+        binding = max(period * c.rate / (1.0 - c.derivative) for c in channels)
+    else:
+        binding = 2.0 * max(c.derivative for c in channels)
+    assert binding == pytest.approx(1.0, abs=5e-3)  # the advice is printed to 3 significant digits
