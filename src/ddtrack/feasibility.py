@@ -210,12 +210,12 @@ def _held_loop(scenario: Any) -> tuple[str, list[Channel]]:
     controller = scenario.controller
     if not hasattr(controller, "held_loop"):
         return "", []
-    peak_speed = reference_peaks(scenario)[0]
-    loop = controller.held_loop(scenario.robot.params(), peak_speed, scenario.simulation.control_period)
+    nominal = scenario.robot.params()
+    loop = controller.held_loop(nominal, reference_peaks(scenario)[0], scenario.simulation.control_period)
     if loop is None:
         return "", []
     try:
-        channels = _channels(loop, scenario.robot.params(), scenario.plant_params())
+        channels = _channels(loop, nominal, scenario.plant_params())
     except (ZeroDivisionError, OverflowError):  # a robot too extreme for floating point has no rate to judge
         return "", []
     judged = all(
