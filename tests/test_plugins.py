@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tomllib
@@ -14,6 +15,7 @@ import pyarrow.parquet as pq
 import pytest
 import tomli_w
 from conftest import ROOT, SCENARIOS
+from documented import documented
 from pydantic import Field
 
 import ddtrack
@@ -130,6 +132,15 @@ def test_the_example_plugin_installs_and_runs_through_run_and_mc(tmp_path):
     env = os.environ | {"PYTHONPATH": str(target)}
     listed = subprocess.run([sys.executable, "-m", "ddtrack", "list"], capture_output=True, text=True, env=env)
     assert "integral_kanayama" in listed.stdout and "wheel_angles" in listed.stdout, listed.stderr
+    # the commands the plugin's README shows, as written (the install above is its first)
+    (install, listing, documented_mc) = [s.command for s in documented("examples/plugin/README.md")]
+    assert install == "pip install examples/plugin" and listing.split()[:2] == ["ddtrack", "list"]
+    (tmp_path / "scenarios").symlink_to(SCENARIOS)
+    for command in (listing, documented_mc):
+        done = subprocess.run(
+            [sys.executable, "-m", *shlex.split(command)], capture_output=True, text=True, env=env, cwd=tmp_path
+        )
+        assert done.returncode == 0 and "integral_kanayama" in done.stdout, f"{command}\n{done.stderr[-2000:]}"
     scenario = str(_scenario_file(tmp_path, "integral_kanayama"))
     seven = ["--set", "plant.model=wheel_angles"]
     run = [sys.executable, "-m", "ddtrack", "run", scenario, *seven, "--set", "simulation.duration=3"]
@@ -183,3 +194,29 @@ def test_each_parameter_reaches_its_controller_under_its_own_name():
             got = getattr(outer, key_name)
             assert got == value or tuple(got) == value, f"{name}.{key_name}: {got} != {value}"
         assert set(config_class.model_fields) - fields <= elsewhere | {"kx", "ky", "ktheta"}, name
+
+
+def test_the_benches_take_a_registered_kind_by_name_and_rank_only_closed_loop_kinds(registered, tmp_path):
+    """A kind registered from Python (as a plugin's is) is in every bench's default selection and accepted by
+    ``--controllers`` (``--suite robots``, ``--scenario``, the quick and standard suites); a kind that plays a plan
+    back (``replay``) is neither, and naming it says why."""
+    from ddtrack.robot_suite import RobotSuite, default_entries, entry_labels, plan_robot_suite
+    from ddtrack.scenario_suite import bench_entries
+    from ddtrack.suite import TUNED, controller_names
+
+    assert not controller_kinds()["replay"].tracks_reference and controller_kinds()["test_kanayama"].tracks_reference
+    assert "test_kanayama" in default_entries() and "replay" not in default_entries()
+    assert controller_names(None)[-2:] == ["test_kanayama", TUNED] and "replay" not in controller_names(None)
+    labels = entry_labels(["test_kanayama", "test_kanayama/cmd_vel"])
+    suite = RobotSuite(robots=("turtlebot3_burger",), trajectories=("square",), conditions=("nominal",), seeds=1)
+    plan = plan_robot_suite(suite, labels)
+    assert [(c.controller, c.scenario.controller.kind) for c in plan.configurations] == [
+        ("test_kanayama", "test_kanayama"),
+        ("test_kanayama/cmd_vel", "test_kanayama"),
+    ]
+    assert plan.configurations[1].scenario.controller.inner == "none"
+    (_, added) = bench_entries([SCENARIOS / "paper_line.toml"], ["test_kanayama"])
+    assert added.label == "test_kanayama" and added.scenario.controller.kind == "test_kanayama"
+    for refused in (lambda: entry_labels(["replay"]), lambda: controller_names(["replay"])):
+        with pytest.raises(ddtrack.ConfigError, match="does not track a reference in closed loop"):
+            refused()

@@ -105,3 +105,19 @@ def test_bench_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):
     code, _, stderr = cli("bench", *args, "--out", tmp_path / "bench")
     assert code == 2 and stderr.startswith(f"error: {field}"), stderr
     assert not (tmp_path / "bench").exists()
+
+
+@pytest.mark.parametrize("name", ["quick", "standard"])
+def test_every_suite_plans_with_its_default_controllers(name):
+    """``bench --suite quick`` and ``standard`` without ``--controllers`` rank every kind that tracks a reference in
+    closed loop: every cell of every one resolves (a kind that needs a plan, replay, once made both exit 2)."""
+    from ddtrack.scenario import tracking_kinds
+    from ddtrack.suite import SUITES, controller_names
+
+    names = controller_names(None)
+    assert names == [*tracking_kinds(), TUNED] and "replay" not in names
+    plan = plan_suite(SUITES[name], names, (1.0, 55.0, 15.0))
+    suite = SUITES[name]
+    cells = len(suite.trajectories) * len(suite.levels) + len(suite.robustness_mass) * len(suite.robustness_friction)
+    assert len(plan.configurations) == len(names) * cells
+    assert {c.controller for c in plan.configurations} == set(names)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
+import typing
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +26,7 @@ from .errors import ConfigError
 from .feasibility import stable_boundary_layer
 from .robot_board import board_markdown, board_table, figure, summarize
 from .robots import PRESETS
-from .scenario import controller_kind
+from .scenario import controller_kind, controller_kinds, tracking_kinds
 from .scenario.files import apply_override, validate_scenario
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep
 
@@ -41,22 +42,55 @@ class Entry:
     keys: tuple[tuple[str, Any], ...] = ()
 
 
-#: torque laws run through a robot's torque input; velocity laws publish (v, omega) as cmd_vel
-ENTRIES = (
-    Entry("backstepping", "backstepping", "torque"),
-    Entry("nn_adaptive_backstepping", "nn_adaptive_backstepping", "torque"),
-    Entry("ltv_lqr", "ltv_lqr", "torque"),
-    Entry("sliding_mode_backstepping", "sliding_mode_backstepping", "torque"),
-    Entry("regulated_pure_pursuit", "regulated_pure_pursuit", "torque"),
-    Entry("adaptive_backstepping", "adaptive_backstepping", "torque"),
-    Entry("mppi", "mppi", "torque"),
-    Entry("kinematic_backstepping", "kinematic_backstepping", "velocity"),
-    Entry("nn_adaptive_backstepping/cmd_vel", "nn_adaptive_backstepping", "velocity", (("inner", "none"),)),
-    Entry("ltv_lqr/cmd_vel", "ltv_lqr", "velocity", (("inner", "none"),)),
-    Entry("regulated_pure_pursuit/cmd_vel", "regulated_pure_pursuit", "velocity", (("inner", "none"),)),
-    Entry("adaptive_compensator", "adaptive_compensator", "velocity"),
-)
-ENTRY = {e.label: e for e in ENTRIES}
+CMD_VEL = "cmd_vel"  #: label suffix of a torque law run without its inner loop, its (v, omega) sent as cmd_vel
+#: torque laws the default board also runs over cmd_vel (the interface a ROS robot offers)
+OVER_CMD_VEL = ("nn_adaptive_backstepping", "ltv_lqr", "regulated_pure_pursuit")
+
+
+def default_entries() -> list[str]:
+    """The board's entries when none are asked for: every registered kind that tracks a reference in closed loop
+    (plugins' included), torque laws first, then velocity laws, then :data:`OVER_CMD_VEL` over cmd_vel."""
+    kinds = controller_kinds()
+    tracking = tracking_kinds()
+    torque = [name for name in tracking if kinds[name].output == "torque"]
+    velocity = [name for name in tracking if kinds[name].output == "velocity"]
+    return [*torque, *velocity, *(f"{name}/{CMD_VEL}" for name in OVER_CMD_VEL if name in torque)]
+
+
+def _drops_inner_loop(config: type[Any]) -> bool:
+    """The config has the shared inner loop's ``inner`` key and it takes ``"none"`` (the law alone, as cmd_vel)."""
+    fields = config.model_fields
+    return "inner" in fields and "none" in typing.get_args(fields["inner"].annotation)
+
+
+def suite_entry(label: str, where: str = "--suite robots") -> Entry:
+    """The entry ``label``: a registered kind that tracks a reference in closed loop, on the plant its output
+    drives; or ``KIND/cmd_vel``, a torque law whose ``inner = "none"`` sends its (v, omega) as cmd_vel. A
+    :class:`ConfigError` naming ``--controllers`` (and ``where`` it was asked for) otherwise."""
+    kinds = controller_kinds()
+    name, slash, variant = label.partition("/")
+    choices = ", ".join(default_entries())
+    if name not in kinds or (slash and variant != CMD_VEL):
+        unknown = f"unknown controller '{label}' for {where}"
+        raise ConfigError("--controllers", unknown, f"choose from: {choices} (or KIND/{CMD_VEL} over cmd_vel)")
+    kind = kinds[name]
+    if not kind.tracks_reference:
+        raise ConfigError(
+            "--controllers",
+            f"'{name}' does not track a reference in closed loop (it plays a plan back), so {where} cannot rank it",
+            f"choose from: {choices}",
+        )
+    if not slash:
+        return Entry(label, name, kind.output)
+    if kind.output != "torque":
+        raise ConfigError("--controllers", f"'{label}': {name} already outputs (v, omega)", f"name it '{name}'")
+    if not _drops_inner_loop(kind.config):
+        raise ConfigError(
+            "--controllers",
+            f"'{label}': {name} has no inner loop to leave out (no inner key that takes \"none\")",
+            f"run it as '{name}', or over cmd_vel a law over the shared inner loop, e.g. 'ltv_lqr/{CMD_VEL}'",
+        )
+    return Entry(label, name, "velocity", (("inner", "none"),))
 
 
 @dataclass(frozen=True)
@@ -195,13 +229,11 @@ class RobotSuite:
 
 
 def entry_labels(requested: Sequence[str] | None, where: str = "--suite robots") -> list[str]:
-    """Every entry, or the requested ones (checked; an error names ``where`` they were asked for)."""
-    names = list(requested) if requested else list(ENTRY)
+    """The default entries, or the requested ones (checked by :func:`suite_entry`; an error names ``where`` they were
+    asked for)."""
+    names = list(requested) if requested else default_entries()
     for name in names:
-        if name not in ENTRY:
-            raise ConfigError(
-                "--controllers", f"unknown controller '{name}' for {where}", f"choose from: {', '.join(ENTRY)}"
-            )
+        suite_entry(name, where)
     if len(set(names)) != len(names):
         raise ConfigError("--controllers", "lists a controller twice")
     return names
@@ -214,7 +246,7 @@ def cells(suite: RobotSuite, entries: Sequence[str]) -> tuple[list[dict], list[d
     for name in suite.robots:
         robot = ROBOTS[name]
         for label in entries:
-            entry = ENTRY[label]
+            entry = suite_entry(label)
             for condition in suite.conditions:
                 cell = {"robot": name, "controller": label, "condition": condition}
                 if robot.plants[entry.output] is None:
@@ -233,7 +265,7 @@ def plan_robot_suite(suite: RobotSuite, entries: Sequence[str]) -> Plan:
     and seed."""
     configurations = []
     for cell in cells(suite, entries)[0]:
-        robot, entry = ROBOTS[cell["robot"]], ENTRY[cell["controller"]]
+        robot, entry = ROBOTS[cell["robot"]], suite_entry(cell["controller"])
         data = base_scenario(robot, entry, cell["trajectory"])
         assert data is not None, "cells() leaves out robots that take no such command"
         overrides = [*(condition_overrides(robot, cell["condition"]) or []), *suite.overrides]

@@ -1,7 +1,7 @@
 """``ddtrack bench --scenario FILE ...``: controllers compared on the user's own robot.
 
 Each ``--scenario`` file is one entry, labelled by its file stem; ``--controllers`` adds the robots suite's entries
-(:data:`ddtrack.robot_suite.ENTRY`), each with its defaults for the first file's robot
+(:func:`ddtrack.robot_suite.suite_entry`), each with its defaults for the first file's robot
 (:func:`ddtrack.robot_suite.entry_controller`). A fair comparison changes only the controller, so every entry's
 resolved scenario must equal the first file's outside ``[controller]`` (and :data:`IGNORED`), and every entry must
 drive the scenario's plant (a velocity law on a torque plant would drive an ideal unicycle instead; a torque law
@@ -25,7 +25,7 @@ from ._format import interval_text, significant
 from .board import GRIP, MOTOR, STATISTICS, interval_columns, run_statistics, warning_codes, write_board
 from .errors import ConfigError
 from .metrics import pooled_improvement
-from .robot_suite import ENTRY, entry_controller, entry_labels
+from .robot_suite import default_entries, entry_controller, entry_labels, suite_entry
 from .scenario import Scenario, controller_output, load_scenario, plant_kind, to_toml_dict, validate_scenario
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 
@@ -84,24 +84,24 @@ def first_difference(reference: Scenario, other: Scenario) -> tuple[str, str, st
     return None
 
 
-def _read(path: Path) -> tuple[Scenario, str]:
-    """A ``--scenario`` file, validated, and what its plant takes; its problems named with ``--scenario`` and the
-    file."""
+def _read(path: Path, overrides: Sequence[str]) -> tuple[Scenario, str]:
+    """A ``--scenario`` file with ``overrides`` applied, validated, and what its plant takes; its problems named with
+    ``--scenario`` and the file."""
     try:
-        scenario = load_scenario(path)
+        scenario = load_scenario(path, overrides=list(overrides))
         return scenario, plant_input(scenario)  # building the plant checks what it reads beyond the parameters
     except ConfigError as exc:
         where = f"{path}: {exc.field}: " if exc.field else ""  # a problem with the file itself names the file
         raise ConfigError("--scenario", where + exc.message, exc.suggestion) from None
 
 
-def _file_entries(paths: Sequence[Path]) -> list[BenchEntry]:
+def _file_entries(paths: Sequence[Path], overrides: Sequence[str]) -> list[BenchEntry]:
     """One entry per file: read, labels distinct, the same experiment as the first file's, on a plant it drives."""
     if not paths:
         raise ConfigError("--scenario", "needs at least one scenario file")
     entries: list[BenchEntry] = []
     for path in paths:
-        scenario, drives = _read(path)
+        scenario, drives = _read(path, overrides)
         for earlier in entries:
             if earlier.label == path.stem:
                 raise ConfigError(
@@ -141,10 +141,10 @@ def _controller_entries(first: BenchEntry, labels: Sequence[str], taken: Sequenc
     """The robots suite's entries ``labels`` on ``first``'s experiment, each with its defaults for that robot."""
     scenario, path = first.scenario, Path(first.source["scenario"])
     drives = plant_input(scenario)
-    fitting = [e.label for e in ENTRY.values() if e.output == drives]
+    fitting = [label for label in default_entries() if suite_entry(label).output == drives]
     entries = []
     for label in entry_labels(labels, where="bench --scenario"):
-        entry = ENTRY[label]
+        entry = suite_entry(label, where="bench --scenario")
         if label in taken:
             raise ConfigError(
                 "--controllers",
@@ -172,10 +172,13 @@ def _controller_entries(first: BenchEntry, labels: Sequence[str], taken: Sequenc
     return entries
 
 
-def bench_entries(paths: Sequence[Path], controllers: Sequence[str] = ()) -> list[BenchEntry]:
+def bench_entries(
+    paths: Sequence[Path], controllers: Sequence[str] = (), overrides: Sequence[str] = ()
+) -> list[BenchEntry]:
     """Every entry of ``bench --scenario``, checked before anything runs (a :class:`ConfigError` naming the option
-    otherwise): the files' entries, then the ``controllers`` added on the first file's experiment."""
-    files = _file_entries(paths)
+    otherwise): the files' entries (``overrides`` applied to each), then the ``controllers`` added on the first
+    file's experiment."""
+    files = _file_entries(paths, overrides)
     if not controllers:
         return files
     return files + _controller_entries(files[0], controllers, [e.label for e in files])

@@ -26,7 +26,7 @@ from .board import STATISTICS, interval_columns, run_statistics, write_board
 from .errors import ConfigError
 from .metrics import pooled_improvement
 from .outdir import atomic_write
-from .scenario import CONTROLLERS, kanayama_gains, load_scenario
+from .scenario import controller_kinds, kanayama_gains, load_scenario, tracking_kinds
 from .shipped import scenario_path
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 from .tune import problems, tune
@@ -115,10 +115,18 @@ SUITES = {
 
 
 def controller_names(requested: Sequence[str] | None) -> list[str]:
-    """Every registered controller and tuned backstepping, or the requested ones (checked)."""
-    known = [*CONTROLLERS, TUNED]
+    """Every registered controller that tracks a reference in closed loop, and tuned backstepping; or the requested
+    ones (checked: a kind that plays a plan back, such as ``replay``, has nothing to rank here)."""
+    kinds = controller_kinds()
+    known = [*tracking_kinds(), TUNED]
     names = list(requested) if requested else known
     for name in names:
+        if name in kinds and name not in known:
+            raise ConfigError(
+                "--controllers",
+                f"'{name}' does not track a reference in closed loop (it plays a plan back), so a suite cannot rank it",
+                f"choose from: {', '.join(known)}",
+            )
         if name not in known:
             raise ConfigError("--controllers", f"unknown controller '{name}'", f"choose from: {', '.join(known)}")
     if len(set(names)) != len(names):

@@ -3,6 +3,7 @@ registered on the ``ddtrack`` group."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -47,9 +48,18 @@ def _names(controllers: str | None) -> list[str] | None:
 @click.option(
     "--controllers",
     metavar="A,B,...",
-    help="Controllers to rank [default: all, and backstepping_tuned; for robots, every torque law and every "
-    "velocity law, label/cmd_vel for a law over cmd_vel]. With --scenario: entries to add, the robots suite's "
-    "labels, each with its defaults for the first file's robot (one the plant does not take is refused).",
+    help="Controllers to rank, any registered kind that tracks a reference in closed loop (plugins' too; not "
+    "replay) [default: all of them, and backstepping_tuned on quick and standard; on robots, also "
+    "KIND/cmd_vel, a torque law without its inner loop, sent as cmd_vel]. With --scenario: entries to add, as on "
+    "robots, each with its defaults for the first file's robot (one the plant does not take is refused).",
+)
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="SECTION.KEY=VALUE",
+    help="Override a value in every cell (or every --scenario file), last: e.g. a shorter simulation.duration to "
+    "try a suite quickly. A changed study is a new study: it does not resume the folder's runs.",
 )
 @click.option(
     "--out",
@@ -65,6 +75,7 @@ def bench(
     scenarios: tuple[Path, ...],
     seeds: int | None,
     controllers: str | None,
+    overrides: tuple[str, ...],
     out: Path,
     overwrite: bool,
     scheduler: str | None,
@@ -94,28 +105,35 @@ def bench(
         )
     if scenarios:
         return _bench_scenarios(
-            scenarios, seeds or SCENARIO_SEEDS, controllers, out, overwrite, scheduler, scheduler_file, workers
+            scenarios,
+            seeds or SCENARIO_SEEDS,
+            controllers,
+            overrides,
+            out,
+            overwrite,
+            scheduler,
+            scheduler_file,
+            workers,
         )
     if seeds is not None:
         raise ConfigError(
             "--seeds", "applies to --scenario benches: the suites fix their own (quick 2, standard 5, robots 3)"
         )
     if suite_name == "robots":
-        return _bench_robots(controllers, out, overwrite, scheduler, scheduler_file, workers)
+        return _bench_robots(controllers, overrides, out, overwrite, scheduler, scheduler_file, workers)
     from ..outdir import check_output, start_resumable
     from ..suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
 
     suite_name = suite_name or "quick"
     names = controller_names(_names(controllers))
-    plan_suite(SUITES[suite_name], names, (1.0, 55.0, 15.0))  # every cell resolves: bad input writes nothing
-    study = f"{suite_name}: {', '.join(names)}"
+    suite = dataclasses.replace(SUITES[suite_name], overrides=(*SUITES[suite_name].overrides, *overrides))
+    plan_suite(suite, names, (1.0, 55.0, 15.0))  # every cell resolves: bad input writes nothing
+    study = f"{suite_name}: {', '.join(names)}" + _changed(overrides)
     resume = check_output(out, command="bench", overwrite=overwrite, study=study)  # the same suite resumes
     enable_compilation_cache()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
-        summary = run_suite(
-            SUITES[suite_name], names, out, client, on_record=lambda done, total: advance(done, total=total)
-        )
+        summary = run_suite(suite, names, out, client, on_record=lambda done, total: advance(done, total=total))
     from ..sweep import read_records
 
     click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
@@ -127,8 +145,14 @@ def bench(
     return 1 if summary["errors"] else 0
 
 
+def _changed(overrides: tuple[str, ...]) -> str:
+    """The study's ``--set`` overrides, as its description in the folder names them (none: nothing)."""
+    return "; set " + ", ".join(overrides) if overrides else ""
+
+
 def _bench_robots(
     controllers: str | None,
+    overrides: tuple[str, ...],
     out: Path,
     overwrite: bool,
     scheduler: str | None,
@@ -140,9 +164,9 @@ def _bench_robots(
     from ..robot_suite import RobotSuite, board_markdown, entry_labels, plan_robot_suite, run_robot_suite
 
     names = entry_labels(_names(controllers))
-    suite = RobotSuite()
+    suite = RobotSuite(overrides=overrides)
     plan_robot_suite(suite, names)
-    study = f"robots: {', '.join(names)}"
+    study = f"robots: {', '.join(names)}" + _changed(overrides)
     resume = check_output(out, command="bench", overwrite=overwrite, study=study)
     enable_compilation_cache()
     start = time.perf_counter()
@@ -162,6 +186,7 @@ def _bench_scenarios(
     paths: tuple[Path, ...],
     seeds: int,
     controllers: str | None,
+    overrides: tuple[str, ...],
     out: Path,
     overwrite: bool,
     scheduler: str | None,
@@ -172,8 +197,10 @@ def _bench_scenarios(
     from ..outdir import check_output, start_resumable
     from ..scenario_suite import FIGURE, bench_entries, board_markdown, run_scenario_bench
 
-    entries = bench_entries(paths, _names(controllers) or ())
-    study = f"scenario: {', '.join(e.label for e in entries)}"  # the same entries resume, whatever the seeds
+    entries = bench_entries(paths, _names(controllers) or (), overrides)
+    study = f"scenario: {', '.join(e.label for e in entries)}" + _changed(
+        overrides
+    )  # the same entries resume, whatever the seeds
     resume = check_output(out, command="bench", overwrite=overwrite, study=study)
     enable_compilation_cache()
     start = time.perf_counter()

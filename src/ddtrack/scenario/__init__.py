@@ -58,6 +58,7 @@ from .registry import plant_kinds as plant_kinds
 from .registry import register_controller as register_controller
 from .registry import register_plant as register_plant
 from .registry import register_trajectory as register_trajectory
+from .registry import tracking_kinds as tracking_kinds
 from .registry import trajectory_kinds as trajectory_kinds
 from .registry import tunable_kinds as tunable_kinds
 from .sections import ConstantDisturbance as ConstantDisturbance

@@ -90,6 +90,7 @@ class ControllerKind:
     differentiable: bool
     needs_reference: bool
     output: Literal["torque", "velocity"]
+    tracks_reference: bool = True
 
     @property
     def tunable(self) -> bool:
@@ -130,6 +131,7 @@ def register_controller(
     differentiable: bool = False,
     needs_reference: bool = False,
     output: Literal["torque", "velocity"] = "torque",
+    tracks_reference: bool = True,
 ) -> type[BaseModel]:
     """Make a controller kind usable by name in scenario files and every command.
 
@@ -151,6 +153,9 @@ def register_controller(
         Wheel torques for the dynamic plant, or (v, omega) for the unicycle with ideal velocity tracking: the
         default, which a config overrides through a ``controller_output()`` method when a key decides it (the
         shared inner loop's ``inner = "none"``; :func:`controller_output`).
+    tracks_reference : bool
+        It tracks the reference in closed loop, from what it measures; False for a law that plays a plan back open
+        loop (``replay``). ``ddtrack bench`` ranks only the kinds that track (:func:`tracking_kinds`).
 
     Returns
     -------
@@ -169,7 +174,9 @@ def register_controller(
         raise TypeError(f"output must be 'torque' or 'velocity', not {output!r}")
     if name in _KINDS and _KINDS[name].config is not config:
         raise TypeError(f"controller kind {name!r} is already registered ({_KINDS[name].config.__qualname__})")
-    _KINDS[name] = ControllerKind(name, config, has_kanayama_gains, differentiable, needs_reference, output)
+    _KINDS[name] = ControllerKind(
+        name, config, has_kanayama_gains, differentiable, needs_reference, output, tracks_reference
+    )
     return config
 
 
@@ -239,6 +246,12 @@ CONTROLLERS: Mapping[str, type[BaseModel]] = _LiveMapping("CONTROLLERS", control
 def kanayama_kinds() -> list[str]:
     """The kinds whose outer law is Kanayama's, so that they have gains (Kx, Ky, Ktheta)."""
     return [name for name, kind in controller_kinds().items() if kind.has_kanayama_gains]
+
+
+def tracking_kinds() -> list[str]:
+    """The kinds that track a reference in closed loop (:attr:`ControllerKind.tracks_reference`): what a benchmark
+    ranks."""
+    return [name for name, kind in controller_kinds().items() if kind.tracks_reference]
 
 
 def tunable_kinds() -> list[str]:
@@ -453,7 +466,7 @@ register_controller(RegulatedPurePursuitConfig, needs_reference=True)
 register_controller(AdaptiveBacksteppingConfig, has_kanayama_gains=True)
 register_controller(MPPIConfig, needs_reference=True)
 register_controller(AdaptiveCompensatorConfig, output="velocity")
-register_controller(ReplayConfig, output="velocity")
+register_controller(ReplayConfig, output="velocity", tracks_reference=False)
 for _trajectory in (LineTrajectory, SquareTrajectory, CircleTrajectory, FigureEightTrajectory, SinusoidTrajectory):
     register_trajectory(_trajectory)
 register_trajectory(WaypointsTrajectory)
