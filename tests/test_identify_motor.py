@@ -5,6 +5,7 @@ scenario runs with ``[plant.motor]``, the voltages the motor plants log, and bad
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 
 import numpy as np
@@ -92,6 +93,13 @@ def test_identify_motor_writes_the_motor_and_robot_a_scenario_runs(tmp_path, cli
         "--max-delay", 0, "--out", out,
     )  # fmt: skip
     assert code == 0 and "R_a = 8.5" in printed and "k_e = 1.6" in printed
+    # SysId's four (and kS), as printed, are the truth's converted: WPILib takes them as they are
+    from ddtrack.sysid.motor import SYSID_NAMES, sysid_constants
+
+    expected_sysid = sysid_constants(drive_constants(truth, MOTOR), wheel_radius=RADIUS, half_axle=HALF)
+    for name, value in zip(SYSID_NAMES, expected_sysid, strict=True):
+        shown = re.findall(rf"#   {name} = ([-+0-9.e]+) \+-", printed)[-1]  # kS is also the drive's
+        assert float(shown) == pytest.approx(value, rel=2e-2 if name == "kS" else 2e-3), name
     fragment = tomllib.loads(out.read_text())
     motor, plant = fragment["plant"]["motor"], fragment["plant"]
     expected_motor = {"resistance": 8.5, "back_emf": 1.6, "torque_constant": 0.9 * 1.2, "efficiency": 1.0}
@@ -197,3 +205,44 @@ def test_a_parameter_the_log_leaves_open_is_named_with_the_plan_that_pins_it():
     model = motor_model(wheel_radius=RADIUS, half_axle=HALF)
     notes = unseparated(model, np.array([38.0, -0.3, 0.2, 1.9, 0.2]), np.array([1.0, 1.0, 0.01, 0.01, 0.01]))
     assert len(notes) == 1 and notes[0].startswith("kA_md") and "ddtrack excite --volts" in notes[0]
+
+
+def test_the_sysid_constants_give_wpilib_the_drivetrain_the_robot_is():
+    """The drive's constants as SysId reports them (kV, kA linear and angular), passed to WPILib's own
+    ``identifyDrivetrainSystem`` with the track width, build the linear system of the voltage-driven robot's side
+    speeds: its step response from rest is the robot's (its own physics, spinning wheels and all), and its time
+    constants are the ones ``identify`` prints. The per-wheel constants passed as they are (what ``identify`` once
+    called SysId's) give one more than ten times too slow."""
+    from scipy.linalg import expm
+    from wpimath.system.plant import LinearSystemId
+
+    from ddtrack.sysid.motor import sysid_constants, time_constants
+
+    truth = RobotParams(
+        mass=1.3,
+        inertia=0.012,
+        com_offset=0.0,  # SysId has no term for the centre of mass's coupling
+        wheel_radius=RADIUS,
+        half_axle=HALF,
+        viscous_friction=0.002,
+        coulomb_friction=0.0,  # nor for kS in the linear system
+        wheel_inertia=BURGER_WHEEL_INERTIA,
+    )
+    drive = drive_constants(truth, MOTOR)
+    kS, kV_lin, kA_lin, kV_ang, kA_ang = sysid_constants(drive, wheel_radius=RADIUS, half_axle=HALF)
+    assert kS == 0.0
+    system = LinearSystemId.identifyDrivetrainSystem(kV_lin, kA_lin, kV_ang, kA_ang, 2 * HALF)
+    A, B = np.asarray(system.A()), np.asarray(system.B())  # states (left, right) speeds [m/s], inputs volts
+    volts = np.array([2.0, 5.0])  # left, right: turning while it speeds up
+    t = np.arange(0.0, 0.3, 1e-3)
+    speeds = motor_log(truth, MOTOR, t, np.tile(volts[::-1], (t.size, 1))).speeds.speed  # (u_r, u_l) in
+    sides = np.column_stack([speeds[:, 0] - HALF * speeds[:, 1], speeds[:, 0] + HALF * speeds[:, 1]])
+    settled = -np.linalg.solve(A, B @ volts)
+    wpilib = np.array([settled - expm(A * s) @ settled for s in t])
+    np.testing.assert_allclose(sides, wpilib, rtol=1e-6, atol=1e-9 * np.abs(settled).max())
+    poles = sorted(-1.0 / np.linalg.eigvals(A).real)
+    assert poles == pytest.approx(sorted(time_constants(drive, wheel_radius=RADIUS, half_axle=HALF)), rel=1e-9)
+    _, _, kA_w, kV, _ = drive
+    naive = LinearSystemId.identifyDrivetrainSystem(kV, drive[0], kV, kA_w, 2 * HALF)
+    slow = sorted(-1.0 / np.linalg.eigvals(np.asarray(naive.A())).real)
+    assert all(s > 10 * p for s, p in zip(slow, poles, strict=True)), (slow, poles)

@@ -299,7 +299,7 @@ def _identify_motor(
 
     from ..model.motor_plants import motor_from_datasheet
     from ..sysid import identify_motor, motor_model, plant_fragment, read_motor_log
-    from ..sysid.motor import fragment_std, time_constants
+    from ..sysid.motor import SYSID_NAMES, SYSID_UNITS, fragment_std, sysid_constants, sysid_std, time_constants
 
     robot = _preset_option(preset) if preset is not None else None
     if mass is None and robot is None:
@@ -320,6 +320,13 @@ def _identify_motor(
         armature = fit.armature
         lines.append(f"#   R_a = {armature.resistance:.6g} +- {1.96 * armature.std[0]:.2g} [ohm]")
         lines.append(f"#   k_e = {armature.back_emf:.6g} +- {1.96 * armature.std[1]:.2g} [V s/rad]")
+    sysid = sysid_constants(fit.drive.params, wheel_radius=radius, half_axle=half)
+    sysid_sigma = sysid_std(fit.drive, wheel_radius=radius, half_axle=half)
+    lines.append(f"#   as WPILib's SysId reports a drivetrain (track width {2 * half:.6g} m; no term for kA_md):")
+    lines += [
+        f"#   {name} = {value:.6g} +- {1.96 * sigma:.2g} [{unit}]"
+        for name, unit, value, sigma in zip(SYSID_NAMES, SYSID_UNITS, sysid, sysid_sigma, strict=True)
+    ]
     lag_v, lag_w = time_constants(fit.drive.params, wheel_radius=radius, half_axle=half)
     lines.append(
         f"#   time constants {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); voltage delay {fit.drive.delay:.3g} s"

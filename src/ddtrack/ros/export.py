@@ -10,7 +10,7 @@ topic              type                                        what
 /odom              nav_msgs/msg/Odometry                       true pose, and body twist (v, 0, omega)
 /odom_estimate     nav_msgs/msg/Odometry                       the odometry the controller saw ([sensing] only)
 /reference         geometry_msgs/msg/PoseStamped               the reference pose
-/cmd_vel           geometry_msgs/msg/Twist (or TwistStamped)   the velocity command (v_cmd, omega_cmd)
+/cmd_vel           geometry_msgs/msg/Twist (or TwistStamped)   the velocity command (v_cmd, omega_cmd), if any
 /joint_states      sensor_msgs/msg/JointState                  wheel angles [rad], speeds [rad/s], torques [N m]
 /reference_path    nav_msgs/msg/Path                           the whole reference, once, at the start
 /path              nav_msgs/msg/Path                           the whole driven path, once, at the end
@@ -217,16 +217,17 @@ def bag_messages(
             s,
             message("geometry_msgs/msg/PoseStamped", header=header(s, WORLD_FRAME), pose=reference),
         )
-        command = twist(columns["v_cmd"][k], columns["omega_cmd"][k])
-        if twist_stamped:
-            yield (
-                "/cmd_vel",
-                "geometry_msgs/msg/TwistStamped",
-                s,
-                message("geometry_msgs/msg/TwistStamped", header=header(s, BODY_FRAME), twist=command),
-            )
-        else:
-            yield "/cmd_vel", "geometry_msgs/msg/Twist", s, command
+        if "v_cmd" in columns:  # absent where a torque law logged no velocity command
+            command = twist(columns["v_cmd"][k], columns["omega_cmd"][k])
+            if twist_stamped:
+                yield (
+                    "/cmd_vel",
+                    "geometry_msgs/msg/TwistStamped",
+                    s,
+                    message("geometry_msgs/msg/TwistStamped", header=header(s, BODY_FRAME), twist=command),
+                )
+            else:
+                yield "/cmd_vel", "geometry_msgs/msg/Twist", s, command
         yield (
             "/joint_states",
             "sensor_msgs/msg/JointState",

@@ -102,7 +102,8 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     ``t, x, y, theta, v, omega, x_ref, y_ref, theta_ref, v_ref, omega_ref, e_x, e_y, e_theta, e_tr,
     v_cmd, omega_cmd, tau_r, tau_l``, every logged scalar (``kx, ky, ktheta``, ``saturated``, ...) and the plant's
     states beyond BODY, by their names.
-    Torques are NaN for a velocity-input plant. ``theta`` and ``theta_ref`` are both continuous
+    Torques are NaN for a velocity-input plant; ``v_cmd`` and ``omega_cmd`` are absent where no velocity was
+    commanded (a torque law that logs no velocity command). ``theta`` and ``theta_ref`` are both continuous
     (unwrapped, so plots show no 2 pi jumps): ``theta_ref = theta + e_theta``, where ``e_theta`` is the
     posture error wrapped to (-pi, pi], so ``theta_ref - theta`` is the true heading error.
 
@@ -121,7 +122,6 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     rows = slice(0, n)
     state = np.asarray(result.state, dtype=float)[rows]
     error = np.asarray(result.error, dtype=float)[rows]
-    control = np.asarray(result.control, dtype=float)[rows]
     logs = {name: np.asarray(value, dtype=float)[rows] for name, value in result.logs.items()}
     ref = {name: np.asarray(value, dtype=float)[rows] for name, value in result.reference._asdict().items()}
     nan = np.full(n, np.nan)
@@ -141,8 +141,8 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
         "e_y": error[:, 1],
         "e_theta": error[:, 2],
         "e_tr": np.hypot(error[:, 0], error[:, 1]),
-        "v_cmd": logs.pop("v_cmd", control[:, 0]),
-        "omega_cmd": logs.pop("omega_cmd", control[:, 1]),
+        # the velocity command, where one was logged or a velocity-driven plant took it; never the torques instead
+        **{name: logs.pop(name) for name in ("v_cmd", "omega_cmd") if name in logs},
         "tau_r": logs.pop("tau_r", nan),
         "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
     }

@@ -248,7 +248,7 @@ def simulate(
             x, memory, status, k, xi_disturbance, xi_noise
         )
         failure_index = jnp.where((status == 0) & (new_status != 0), k, failure_index)
-        channels = logs | plant.logged(x, u)  # e.g. the torques a torque-driven plant applied
+        channels = commanded(plant, u) | logs | plant.logged(x, u)  # e.g. the torques a torque-driven plant applied
         extra = {name: x[plant.state_layout.index(name)] for name in recorded(plant).names if name not in BODY.names}
         record = (body, ref, error, u, {name: jnp.asarray(value, float) for name, value in channels.items()}, extra)
         return (x_next, next_memory, new_status, failure_index), record
@@ -266,6 +266,12 @@ def measured(plant: Plant, x: Array) -> Array:
     """What the controller's sensors report at x, a BODY vector before noise: ``plant.measure(x)`` where the plant
     has one (odometry, a delayed measurement: ``ddtrack.model.SensedPlant``), else the true ``plant.observe(x)``."""
     return getattr(plant, "measure", plant.observe)(x)
+
+
+def commanded(plant: Plant, u: Array) -> dict[str, Array]:
+    """The held command of a velocity-driven plant as ``v_cmd`` [m/s], ``omega_cmd`` [rad/s] (a controller's own
+    logs of them take precedence); nothing for other inputs: a torque plant logs the torques it applied itself."""
+    return {"v_cmd": u[0], "omega_cmd": u[1]} if plant.input_kind == "velocity" else {}
 
 
 def recorded(plant: Plant) -> Layout:

@@ -9,7 +9,8 @@ q = (kA_v, kA_md, kA_w, kV, kS) = (M_v / g, m d / g, M_w / g, k_e + b_w / g, tau
     L (u_R - u_L) / R = kA_w omega_dot + kA_md v omega + L (kV (phi_R - phi_L) + kS (s_R - s_L)) / R
 
 with phi_i the wheel speeds and s_i = tanh(phi_i / eps_f): the body model with voltages for torques, so the same
-fit serves both (WPILib's SysId characterises a drivetrain by the same kS, kV and kA). Voltages and motion fix q
+fit serves both. WPILib's SysId characterises a drivetrain by kS, kV and kA too, but per side and per body motion
+(linear and angular): :func:`sysid_constants` converts q to those. Voltages and motion fix q
 only: every torque in it is scaled by the one motor gain g, so a known mass anchors it (g = m / kA_v, the wheels'
 spin inertia folded in as in the body model). Currents, where logged, separate the motor itself: the armature
 equation u = R_a i + k_e phi_dot gives R_a and k_e by least squares, then eta k_t = g R_a and the wheels' viscous
@@ -136,6 +137,36 @@ def drive_constants(robot: RobotParams, motor: DCMotor) -> np.ndarray:
     inertia_axle = float(robot.inertia) + m * d**2 + spin * L**2
     viscous, coulomb = float(robot.viscous_friction), float(robot.coulomb_friction)
     return np.array([m + spin, m * d, inertia_axle, gain * float(motor.back_emf) + viscous, coulomb]) / gain
+
+
+#: the names WPILib's SysId gives a drivetrain's constants, and their units (angular ones per rad/s of yaw rate)
+SYSID_NAMES = ("kS", "kV_linear", "kA_linear", "kV_angular", "kA_angular")
+SYSID_UNITS = ("V", "V s/m", "V s^2/m", "V s/rad", "V s^2/rad")
+
+
+def sysid_constants(params: np.ndarray, *, wheel_radius: float, half_axle: float) -> np.ndarray:
+    """WPILib SysId's drivetrain constants (:data:`SYSID_NAMES`) from the drive's (kA_v, kA_md, kA_w, kV, kS).
+
+    SysId writes each side's voltage as kS sgn + kV x + kA x_dot, linear (x the side's speed [m/s], both sides
+    equal) and angular (x the yaw rate [rad/s], the sides opposite). Put v or omega alone into the motor model
+    (wheel speeds (v +- L omega) / R, u_R = +-u_L): kV_linear = kV / R, kA_linear = R kA_v / 2,
+    kV_angular = L kV / R, kA_angular = R kA_w / (2 L), and kS as it is. SysId has no term for the centre of mass's
+    coupling kA_md (zero with the centre of mass on the axle). WPILib's ``identifyDrivetrainSystem`` takes them with
+    the track width 2 L (tests/test_identify_motor.py checks the system it builds against the motor plant)."""
+    kA_v, _, kA_w, kV, kS = (float(value) for value in params)
+    R, L = float(wheel_radius), float(half_axle)
+    return np.array([kS, kV / R, R * kA_v / 2, L * kV / R, R * kA_w / (2 * L)])
+
+
+def sysid_std(fit: SpeedFit, *, wheel_radius: float, half_axle: float) -> np.ndarray:
+    """The standard errors of :func:`sysid_constants` of ``fit``, by the delta method from the drive's covariance."""
+
+    def named(x: np.ndarray) -> dict[str, float]:
+        values = sysid_constants(x, wheel_radius=wheel_radius, half_axle=half_axle)
+        return dict(zip(SYSID_NAMES, (float(v) for v in values), strict=True))
+
+    std = propagated(named, np.asarray(fit.params, dtype=float), fit.covariance)
+    return np.array([std[name] for name in SYSID_NAMES])
 
 
 def time_constants(params: np.ndarray, *, wheel_radius: float, half_axle: float) -> tuple[float, float]:
