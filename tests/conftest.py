@@ -123,7 +123,9 @@ LONGEST_FIRST = (
     "test_golden.py",  # 165 s (before its cross cases ran unbatched: alone on one core 125 -> 101 s)
     "test_determinism.py",  # 100
     "test_identify.py",  # 89
-    "test_readme.py",  # 82
+    "test_readme.py",  # 172 (every command the README shows; measured beside a running benchmark)
+    "test_guide.py",  # 106 (likewise, the guide's)
+    "test_install.py",  # 77 (a new venv: pip installs ddtrack and its dependencies)
     "test_examples.py",  # 56
     "test_sweep.py",  # 56
     "test_nn_adaptive.py",  # 54

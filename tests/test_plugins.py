@@ -9,14 +9,16 @@ import shlex
 import subprocess
 import sys
 import tomllib
-from typing import Literal
+from typing import ClassVar, Literal
 
+import jax.numpy as jnp
+import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import tomli_w
 from conftest import ROOT, SCENARIOS
 from documented import documented
-from pydantic import Field
+from pydantic import BaseModel, Field
 
 import ddtrack
 from ddtrack.controllers import Backstepping, Cascade
@@ -220,3 +222,66 @@ def test_the_benches_take_a_registered_kind_by_name_and_rank_only_closed_loop_ki
     for refused in (lambda: entry_labels(["replay"]), lambda: controller_names(["replay"])):
         with pytest.raises(ddtrack.ConfigError, match="does not track a reference in closed loop"):
             refused()
+
+
+@ddtrack.pytree_dataclass
+class _Silent:
+    """A law that logs nothing: constant wheel torques, or a constant (v, omega) command."""
+
+    command: tuple[float, float]
+    output_kind: ClassVar[str]
+
+    def init(self, x0, ref0, key):
+        return ()
+
+    def step(self, t, y, ref, memory):
+        return jnp.asarray(self.command), memory, {}
+
+
+@ddtrack.pytree_dataclass
+class _SilentTorque(_Silent):
+    output_kind: ClassVar[str] = "torque"
+
+
+@ddtrack.pytree_dataclass
+class _SilentVelocity(_Silent):
+    output_kind: ClassVar[str] = "velocity"
+
+
+class SilentTorqueConfig(BaseModel):
+    """Constant wheel torques, nothing logged (registered by a test)."""
+
+    kind: Literal["silent_torque"]
+
+    def build(self, nominal, control_period, key):
+        return _SilentTorque((0.2, 0.1))
+
+
+class SilentVelocityConfig(BaseModel):
+    """A constant (v, omega) command, nothing logged (registered by a test)."""
+
+    kind: Literal["silent_velocity"]
+
+    def build(self, nominal, control_period, key):
+        return _SilentVelocity((0.3, 0.1))
+
+
+def test_a_law_that_logs_nothing_gets_no_other_quantity_in_its_columns(tmp_path):
+    """Columns come from layouts by name: a torque law that logs no velocity command has no ``v_cmd`` or
+    ``omega_cmd`` column (its torques once filled them), and a velocity law's command is recorded as ``v_cmd``,
+    ``omega_cmd`` whether it logs it or not."""
+    ddtrack.register_controller(SilentTorqueConfig)
+    ddtrack.register_controller(SilentVelocityConfig, output="velocity")
+    try:
+        torque = ddtrack.load_scenario(_scenario_file(tmp_path, "silent_torque"), overrides=SHORT)
+        columns = ddtrack.timeseries(ddtrack.run(torque))
+        assert "v_cmd" not in columns and "omega_cmd" not in columns
+        assert np.all(columns["tau_r"] == 0.2) and np.all(columns["tau_l"] == 0.1)
+        velocity = ddtrack.load_scenario(
+            _scenario_file(tmp_path, "silent_velocity"), overrides=[*SHORT, "plant.model=unicycle"]
+        )
+        columns = ddtrack.timeseries(ddtrack.run(velocity))
+        assert np.all(columns["v_cmd"] == 0.3) and np.all(columns["omega_cmd"] == 0.1)
+        assert np.all(np.isnan(columns["tau_r"]))
+    finally:
+        del registry._KINDS["silent_torque"], registry._KINDS["silent_velocity"]

@@ -471,37 +471,20 @@ for _trajectory in (LineTrajectory, SquareTrajectory, CircleTrajectory, FigureEi
     register_trajectory(_trajectory)
 register_trajectory(WaypointsTrajectory)
 register_plant("dynamic", DynamicPlant, summary="The Lagrangian robot driven by wheel torques (the default).")
-register_plant(
-    "motor_torque",
-    motor_torque_plant,
-    summary="The robot's geared DC motors under current control: torque commands within the torque-speed curve.",
-    reads_scenario=True,
-)
-register_plant(
-    "motor_velocity",
-    motor_velocity_plant,
-    summary="The robot's motors under a PI wheel-speed loop: (v, omega) commands, as ROS bases take cmd_vel.",
-    reads_scenario=True,
-)
-register_plant(
-    "lag",
-    lag_plant,
-    summary="A velocity-commanded base's identified first-order lags (Martins et al.), from [robot] preset.",
-    reads_scenario=True,
-)
-register_plant(
-    "slip",
-    slip_plant_config,
-    summary="The robot on a floor of finite grip, its wheels free to slip (needs wheel_inertia > 0).",
-    reads_scenario=True,
-)
-register_plant(
-    "slip_velocity",
-    slip_velocity_plant_config,
-    summary="The robot's motors under a PI wheel-speed loop on a floor of finite grip: (v, omega) commands, "
-    "wheels free to slip.",
-    reads_scenario=True,
-)
+_SCENARIO_PLANTS = (  # each builds its plant from the scenario too (a preset's motor, a driver's gains)
+    ("motor_torque", motor_torque_plant, "The robot's geared DC motors under current control: torque commands "
+     "within the torque-speed curve."),
+    ("motor_velocity", motor_velocity_plant, "The robot's motors under a PI wheel-speed loop: (v, omega) commands, "
+     "as ROS bases take cmd_vel."),
+    ("lag", lag_plant, "A velocity-commanded base's identified first-order lags (Martins et al.), from "
+     "[robot] preset."),
+    ("slip", slip_plant_config, "The robot on a floor of finite grip, its wheels free to slip (needs "
+     "wheel_inertia > 0)."),
+    ("slip_velocity", slip_velocity_plant_config, "The robot's motors under a PI wheel-speed loop on a floor of finite "
+     "grip: (v, omega) commands, wheels free to slip."),
+)  # fmt: skip
+for _name, _build, _summary in _SCENARIO_PLANTS:
+    register_plant(_name, _build, summary=_summary, reads_scenario=True)
 register_plant(
     "unicycle",
     lambda params: KinematicPlant(),
