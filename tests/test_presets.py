@@ -96,7 +96,10 @@ def test_a_reference_beyond_the_robot_is_warned_and_nothing_changed():
     assert scenario.controller.max_velocity == 1.0  # the controller's clamp stays as the file sets it
     warnings = check(scenario)  # 0.3 m/s against 0.197, 3 rad/s against 2.46
     assert [w["code"] for w in warnings] == ["reference_beyond_robot"] * 2
-    assert "0.3 m/s, above the top speed of a turtlebot3_burger (robot.preset), 0.197 m/s" in warnings[0]["message"]
+    assert (
+        "0.3 m/s, above the top speed of a turtlebot3_burger (robot.preset), its motors at 11.1 V, 0.197 m/s"
+        in warnings[0]["message"]
+    )
     assert "3 rad/s, above the top yaw rate" in warnings[1]["message"]
     assert check(validate_scenario(with_robot(preset="turtlebot3_burger"))) == []  # 0.1 m/s is within 0.197
     assert check(validate_scenario({**faster, "robot": {"mass": 1.0, "inertia": 0.004, "half_axle": 0.08}})) == []
@@ -115,3 +118,31 @@ def test_a_shipped_scenario_runs_on_a_preset():
     assert [w["code"] for w in warnings] == ["reference_beyond_robot"] and "0.5 m/s" in warnings[0]["message"]
     assert result.status_name == "ok"
     assert tomllib.loads(tomli_w.dumps(to_toml_dict(scenario)))["robot"]["preset"] == "turtlebot3_burger"
+
+
+def test_the_top_speed_is_the_motors_at_the_scenario_s_supply_voltage():
+    """The refusal of an open-loop plan and the reference's warning take the motors' no-load speed at
+    ``[plant.motor] supply_voltage`` (with ROBOTIS' own limit, 0.22 m/s, above it): at 12.6 V the Burger's XL430s
+    reach 0.224 m/s at the wheel, so a 0.21 m/s plan runs (it was refused against 11.1 V's 0.197); at 9 V they reach
+    0.1597 m/s, so a 0.19 m/s plan is refused (it was accepted, and the robot reached 0.156)."""
+    from ddtrack.model.motor_plants import motor_from_datasheet
+
+    burger = robots.preset("turtlebot3_burger")
+    motor = motor_from_datasheet(burger.motor)
+    radius = burger.params["wheel_radius"]
+
+    def plan(speed: float, volts: float) -> dict:
+        data = with_robot(preset="turtlebot3_burger")
+        data["plant"] = {"model": "motor_velocity", "motor": {"supply_voltage": volts}}
+        data["controller"] = {"kind": "replay", "times": [0.0, 1.0], "commands": [[speed, 0.0], [0.0, 0.0]]}
+        return data
+
+    at_12_6 = validate_scenario(plan(0.21, 12.6))
+    top, _, what = at_12_6.top_speeds()
+    assert top == pytest.approx(min(0.22, 12.6 / 11.1 * float(motor.no_load_speed) * radius), rel=1e-12)
+    assert top == pytest.approx(0.22) and "12.6 V" in what  # ROBOTIS' limit binds above 12.3 V
+    with pytest.raises(
+        ConfigError, match=r"0\.19 m/s, above the top speed of a turtlebot3_burger .* at 9 V, 0\.1597 m/s"
+    ):
+        validate_scenario(plan(0.19, 9.0))
+    assert validate_scenario(plan(0.15, 9.0)).top_speeds()[0] == pytest.approx(9 / 11.1 * 0.197, rel=1e-2)

@@ -133,3 +133,23 @@ def test_a_misspelt_preset_name_says_which_was_meant():
 def test_the_documentation_shows_the_numbers_the_code_holds(name):
     page = (ROOT / "docs" / "robots.md").read_text()
     assert robots.markdown_table(robots.preset(name)) in page
+
+
+@pytest.mark.parametrize(("name", "needed"), [("turtlebot3_burger", 1.93), ("turtlebot3_waffle_pi", 1.63)])
+def test_the_grip_needed_at_stall_counts_the_wheels_spin_inertia(name, needed):
+    """From rest at full torque, part of each wheel's torque spins the wheel itself up: the floor's push is the
+    body's m a / 2 under the Lagrangian model (which carries the wheels' spin inertia), not tau / R. The TurtleBots'
+    geared servos reflect 3.7 and 5.8 times the body's mass at the wheels, so they need 1.93 and 1.63, not the 9.09
+    and 11.1 that tau / R over the load gave."""
+    import jax.numpy as jnp
+
+    from ddtrack.model.dynamics import body_acceleration
+
+    found = robots.preset(name)
+    params = dataclasses.replace(found.robot_params(), coulomb_friction=0.0)  # the torque itself, all of it
+    stall = jnp.full(2, found.params["max_torque"])
+    v_dot, omega_dot = body_acceleration(params, jnp.zeros(2), stall, jnp.zeros(2))
+    push = found.params["mass"] * float(v_dot) / 2.0  # each wheel's share of m a
+    assert abs(float(omega_dot)) < 1e-12  # straight ahead
+    assert found.friction_at_torque_limit() == pytest.approx(push / found.wheel_load(), rel=1e-12)
+    assert found.friction_at_torque_limit() == pytest.approx(needed, abs=0.005)

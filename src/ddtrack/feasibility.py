@@ -117,22 +117,21 @@ def check_clamps(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
 
 
 def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
-    """Warn where the reference exceeds the top speed or yaw rate of the ``robot.preset`` (the simulated plant may
-    follow it, the real robot could not). Nothing is changed: the controller's clamps stay as the file sets them."""
-    robot = scenario.robot.preset_robot()  # the scenario layer reads the presets (they sit above this module)
-    if robot is None:
-        return []
+    """Warn where the reference exceeds the true robot's top speed or yaw rate (``Scenario.top_speeds``: the
+    ``robot.preset``'s, its motors' at their supply voltage); the simulated plant may follow it, the real robot could
+    not. Nothing is changed: the controller's clamps stay as the file sets them."""
+    top_speed, top_yaw_rate, what = scenario.top_speeds()
     warnings = []
-    for what, unit, top, peak in (
-        ("speed", "m/s", robot.max_speed, peaks[0]),
-        ("yaw rate", "rad/s", robot.max_yaw_rate, peaks[1]),
+    for quantity, unit, top, peak in (
+        ("speed", "m/s", top_speed, peaks[0]),
+        ("yaw rate", "rad/s", top_yaw_rate, peaks[1]),
     ):
         if top is not None and peak > top:
             warnings.append(
                 {
                     "code": "reference_beyond_robot",
-                    "message": f"the reference's {what} reaches {peak:.3g} {unit}, above the top {what} of a "
-                    f"{robot.name} (robot.preset), {top:.3g} {unit}: the real robot could not follow it",
+                    "message": f"the reference's {quantity} reaches {peak:.3g} {unit}, above the top {quantity} of "
+                    f"{what}, {top:.3g} {unit}: the real robot could not follow it",
                 }
             )
     return warnings
@@ -140,12 +139,13 @@ def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
 
 def check_open_loop(scenario: Any) -> None:
     """Refuse an open-loop controller's plan (``[controller] kind = "replay"``, through its ``check_within``) that
-    commands more than the top speed or yaw rate of the ``robot.preset``: unlike a reference, no clamp stands between
-    the plan and the plant, and a log of it would describe a robot that does not exist."""
+    commands more than the true robot's top speed or yaw rate (``Scenario.top_speeds``): unlike a reference, no clamp
+    stands between the plan and the plant, and a log of it would describe a robot that does not exist."""
     within = getattr(scenario.controller, "check_within", None)
-    robot = scenario.robot.preset_robot()
-    if callable(within) and robot is not None:
-        within(robot.max_speed, robot.max_yaw_rate, robot.name)
+    if callable(within):
+        top_speed, top_yaw_rate, what = scenario.top_speeds()
+        if top_speed is not None or top_yaw_rate is not None:
+            within(top_speed, top_yaw_rate, what)
 
 
 def check_angles(scenario: Any) -> None:

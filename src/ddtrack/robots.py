@@ -134,6 +134,10 @@ class RobotPreset:
         Field name -> where its value comes from.
     assumptions : Mapping[str, str]
         Field name -> why its value was chosen or how it was derived.
+    rated_limits : tuple of 2 floats or None
+        The maker's top speed [m/s] and yaw rate [rad/s] whatever the motors' voltage (the firmware's limits);
+        None: ``max_speed`` and ``max_yaw_rate`` are the maker's. A scenario's top speeds are these and the
+        motors' no-load speed at its supply voltage (``Scenario.top_speeds``).
     """
 
     name: str
@@ -148,6 +152,17 @@ class RobotPreset:
     input: InputKind
     sources: Mapping[str, str]
     assumptions: Mapping[str, str]
+    rated_limits: tuple[float, float] | None = None
+
+    @property
+    def rated_speed(self) -> float | None:
+        """The maker's top speed [m/s] (:attr:`rated_limits`, else :attr:`max_speed`)."""
+        return self.max_speed if self.rated_limits is None else self.rated_limits[0]
+
+    @property
+    def rated_yaw_rate(self) -> float | None:
+        """The maker's top yaw rate [rad/s] (:attr:`rated_limits`, else :attr:`max_yaw_rate`)."""
+        return self.max_yaw_rate if self.rated_limits is None else self.rated_limits[1]
 
     def robot_params(self) -> RobotParams:
         """The preset as :class:`ddtrack.model.RobotParams`: the fields it has; the others keep their defaults."""
@@ -167,9 +182,12 @@ class RobotPreset:
         return weight * (1.0 - self.params["com_offset"] / self.caster_position) / 2.0
 
     def friction_at_torque_limit(self) -> float:
-        """Floor friction a wheel needs to pass its full torque to the floor, (max_torque / R) / wheel load (real
-        floors give 0.3-1.0)."""
-        return self.params["max_torque"] / self.params["wheel_radius"] / self.wheel_load()
+        """Floor friction a wheel needs at full torque from rest, straight ahead (real floors give 0.3-1.0): the
+        floor's force F over the wheel's load, where the torque first spins the wheel up, J_w a / R^2 of it, so
+        F = (max_torque / R) / (1 + 2 J_w / (m R^2)) with a = 2 F / m."""
+        mass, radius = self.params["mass"], self.params["wheel_radius"]
+        force = self.params["max_torque"] / radius / (1.0 + 2.0 * self.wheel_inertia / (mass * radius**2))
+        return force / self.wheel_load()
 
 
 def markdown_table(preset: RobotPreset) -> str:
@@ -302,6 +320,7 @@ def _turtlebot3(
         caster_position=sum(casters) / len(casters),
         max_speed=min(spec_speed, top_speed),
         max_yaw_rate=min(spec_yaw_rate, top_speed / half_axle),
+        rated_limits=(spec_speed, spec_yaw_rate),
         motor=motor,
         lag=None,
         input="velocity",

@@ -114,6 +114,25 @@ class Scenario(_Section):
 
         return divergence_bound(self)
 
+    def top_speeds(self) -> tuple[float | None, float | None, str]:
+        """The true robot's top speed [m/s] and yaw rate [rad/s] (None: nothing bounds it) and what sets them: the
+        ``[robot] preset``'s rated limits, and its motor's no-load speed at the supply voltage (``[plant.motor]``
+        over the preset's datasheet) times R, and over L for the yaw rate, on the true robot's wheels."""
+        from .motor_configs import motor_or_none
+
+        robot = self.robot.preset_robot()
+        speed = None if robot is None else robot.rated_speed
+        yaw_rate = None if robot is None else robot.rated_yaw_rate
+        what = "" if robot is None else f"a {robot.name} (robot.preset)"
+        motor = motor_or_none(self)
+        if motor is not None:
+            params = self.plant_params()
+            top = float(motor.no_load_speed) * params.wheel_radius
+            speed = top if speed is None else min(speed, top)
+            yaw_rate = top / params.half_axle if yaw_rate is None else min(yaw_rate, top / params.half_axle)
+            what = f"{what or 'the robot of [plant.motor]'}, its motors at {float(motor.supply_voltage):g} V"
+        return speed, yaw_rate, what
+
     def plant_params(self) -> RobotParams:
         """The true plant's nominal values: [plant] over [robot]."""
         true = self.plant.model_dump(

@@ -105,9 +105,9 @@ class ReplayConfig(_ControllerSection):
         return f"controller.commands[{row}]", f"the command at t = {self.times[row]:g} s"  # type: ignore[index]
 
     def check_within(self, top_speed: float | None, top_yaw_rate: float | None, robot: str) -> None:
-        """Refuse (:class:`ConfigError`) a command above the top speed [m/s] or yaw rate [rad/s] of ``robot`` (None:
-        no limit): the simulated plant may follow it, the real robot could not, and its log would describe a robot
-        that does not exist."""
+        """Refuse (:class:`ConfigError`) a command above the top speed [m/s] or yaw rate [rad/s] of ``robot`` (what
+        sets them, e.g. "a turtlebot3_burger (robot.preset)"; None: no limit): the simulated plant may follow it, the
+        real robot could not, and its log would describe a robot that does not exist."""
         commands = np.abs(np.asarray(self.commands, float))
         for column, (what, unit, top) in enumerate((("speed", "m/s", top_speed), ("yaw rate", "rad/s", top_yaw_rate))):
             if top is not None and np.any(commands[:, column] > top):
@@ -116,8 +116,9 @@ class ReplayConfig(_ControllerSection):
                 raise ConfigError(
                     field,
                     f"{where} commands a {what} of {float(commands[row, column]):.4g} {unit}, above the top {what} "
-                    f"of a {robot} (robot.preset), {top:.4g} {unit}: the real robot could not follow it",
-                    f"scale the plan to the robot (ddtrack excite --preset {robot}), or remove robot.preset",
+                    f"of {robot}, {top:.4g} {unit}: the real robot could not follow it",
+                    "scale the plan to the robot (ddtrack excite --preset NAME), or raise plant.motor.supply_voltage "
+                    "to the battery's",
                 )
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Replay:
