@@ -23,14 +23,15 @@ from ddtrack.metrics import improvement
 from ddtrack.runner import batch_metrics, enable_compilation_cache, prepare_batch
 from ddtrack.scenario import load_scenario
 
-BASE = Path(__file__).resolve().parent.parent / "scenarios" / "burger_20hz.toml"
+BASE = Path(__file__).resolve().parent.parent / "scenarios" / "burger_sized_20hz.toml"
 
 
 def _circle(radius: float, speed: float) -> list[str]:
     return [f"trajectory.radius={radius}", f"trajectory.speed={speed}", f"initial.pose=[0.0, {-1.2 * radius}, 0.0]"]
 
 
-#: Overrides of scenarios/burger_20hz.toml per robot: [robot], [plant] (+20 % mass, +25 % inertia), clamps, circle.
+#: Overrides of scenarios/burger_sized_20hz.toml per robot: [robot], [plant] (+20 % mass, +25 % inertia), clamps,
+#: circle.
 ROBOTS = {
     "burger": _circle(0.5, 0.15),
     "3kg": [

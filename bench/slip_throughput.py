@@ -5,7 +5,7 @@
 Cases (backstepping, or kinematic backstepping where named, at 10 ms, ``simulation.substeps = 10``; the no-slip plants
 with the same wheel inertia):
 
-* ``turtlebot3_burger``: the circle of ``scenarios/burger_20hz.toml`` on the preset with its motors;
+* ``turtlebot3_burger``: the circle of ``scenarios/burger_sized_20hz.toml`` on the preset with its motors;
   ``motor_torque`` (no slip, motors through the current driver) and ``dynamic`` against ``slip`` (RK4, its sub-steps
   chosen from the contact stiffness);
 * ``paper_geared``: the paper's line case (``scenarios/paper_line.toml``) with J_w = 0.005 kg m^2; ``dynamic``
@@ -33,11 +33,11 @@ COMMON = ["simulation.control_period=0.01", "simulation.substeps=10"]
 BURGER = ['robot.preset="turtlebot3_burger"', "plant.com_offset=-0.01"]
 #: case: (scenario file, overrides, slip model, no-slip models, controller)
 CASES = {
-    "turtlebot3_burger": ("burger_20hz.toml", BURGER, "slip", ("motor_torque", "dynamic"), "backstepping"),
+    "turtlebot3_burger": ("burger_sized_20hz.toml", BURGER, "slip", ("motor_torque", "dynamic"), "backstepping"),
     "paper_geared": ("paper_line.toml", ["plant.wheel_inertia=0.005"], "slip", ("dynamic",), "backstepping"),
     "paper_light_wheel": ("paper_line.toml", ["plant.wheel_inertia=0.000125"], "slip", ("dynamic",), "backstepping"),
     "turtlebot3_burger_cmd_vel": (
-        "burger_20hz.toml",
+        "burger_sized_20hz.toml",
         BURGER,
         "slip_velocity",
         ("motor_velocity",),

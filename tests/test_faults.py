@@ -257,7 +257,7 @@ def test_the_default_divergence_bound_scales_with_the_scenario():
     # 20 m long, L = 0.25 m) and a Burger's 0.5 m circle, which a fixed 50 m bound would have let wander 50 m
     line = ddtrack.load_scenario(SCENARIOS / "paper_line.toml")
     assert line.divergence_distance() == pytest.approx(3 * (10.0 + 20.0 + 0.5), rel=1e-6)
-    burger = ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml")
+    burger = ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml")
     assert 2.0 < burger.divergence_distance() < 6.0
     fixed = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=["simulation.divergence_error=50"])
     assert fixed.divergence_distance() == 50.0

@@ -16,14 +16,14 @@ from ddtrack.sim import remedy
 
 def test_a_reference_faster_than_the_clamp_is_refused(cli):
     # a 1 m/s circle for a Burger clamped at 0.22 m/s ran "ok" with 1.89 m of error before
-    code, _, stderr = cli("validate", SCENARIOS / "burger_20hz.toml", "--set", "trajectory.speed=1")
+    code, _, stderr = cli("validate", SCENARIOS / "burger_sized_20hz.toml", "--set", "trajectory.speed=1")
     assert code == 2 and "Traceback" not in stderr
     assert "trajectory.speed" in stderr and "1 m/s" in stderr and "controller.max_velocity = 0.22" in stderr
 
 
 def test_a_speed_in_km_per_hour_gets_the_conversion():
     with pytest.raises(ConfigError, match=r"meant in km/h, that is 0\.139 m/s"):
-        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["trajectory.speed=0.5"])
+        ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml", overrides=["trajectory.speed=0.5"])
 
 
 def test_a_yaw_rate_beyond_the_clamp_is_refused():
@@ -40,9 +40,9 @@ def test_an_angle_in_degrees_is_refused_with_its_radians(cli):
 
 def test_a_mass_in_grams_is_refused():
     with pytest.raises(ConfigError, match="robot.mass.*radius of gyration"):
-        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["robot.mass=1000"])
+        ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml", overrides=["robot.mass=1000"])
     with pytest.raises(ConfigError, match="plant.mass"):
-        ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=["plant.mass=1000"])
+        ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml", overrides=["plant.mass=1000"])
 
 
 def test_a_reference_near_the_clamp_is_warned(cli):

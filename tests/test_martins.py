@@ -187,7 +187,7 @@ def test_it_is_a_velocity_controller_usable_by_name(cli, tmp_path):
 
 def test_a_torque_plant_refuses_it_naming_plant_model():
     scenario = ddtrack.load_scenario(
-        SCENARIOS / "burger_20hz.toml",
+        SCENARIOS / "burger_sized_20hz.toml",
         controller=KIND,
         overrides=['robot.preset="turtlebot3_burger"', "plant.model=motor_torque"],
     )

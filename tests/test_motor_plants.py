@@ -283,7 +283,7 @@ def test_a_scenario_names_the_motor_plants_and_gets_its_presets_motor():
     ``[plant] velocity_pi``, by name, for a velocity-output controller (as over cmd_vel); without a motor, refused."""
     burger = [*SHORT, 'robot.preset="turtlebot3_burger"']
     scenario = ddtrack.load_scenario(
-        SCENARIOS / "burger_20hz.toml",
+        SCENARIOS / "burger_sized_20hz.toml",
         overrides=[*burger, "plant.model=motor_velocity", "plant.velocity_pi=[3, 40]"],
         controller="kinematic_backstepping",
     )
@@ -301,7 +301,9 @@ def test_a_scenario_names_the_motor_plants_and_gets_its_presets_motor():
     low, high = torque_envelope(expected, wheel)
     assert np.all(columns["tau_r"][:-1] <= np.asarray(high)[:-1] + 1e-9)
     assert np.all(columns["tau_r"][:-1] >= np.asarray(low)[:-1] - 1e-9)
-    torque = ddtrack.load_scenario(SCENARIOS / "burger_20hz.toml", overrides=[*burger, "plant.model=motor_torque"])
+    torque = ddtrack.load_scenario(
+        SCENARIOS / "burger_sized_20hz.toml", overrides=[*burger, "plant.model=motor_torque"]
+    )
     assert isinstance(prepare(torque)[0].plant, TorqueDrivenPlant)
     no_motor = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*SHORT, "plant.model=motor_torque"])
     with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: 'motor_torque' needs the robot's motor.*burger"):

@@ -19,7 +19,7 @@ from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
 from ddtrack.sim import stack, vmap_runs
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
-BURGER = SCENARIOS / "burger_20hz.toml"
+BURGER = SCENARIOS / "burger_sized_20hz.toml"
 LINE = SCENARIOS / "paper_line.toml"
 NN = "nn_adaptive_backstepping"
 

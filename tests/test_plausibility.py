@@ -61,7 +61,7 @@ def _burger_run(cli, out, *overrides: str) -> tuple[int, dict, str]:
         *overrides,
     ]
     code, _, stderr = cli(
-        "run", SCENARIOS / "burger_20hz.toml", *(a for s in settings for a in ("--set", s)), "--out", out
+        "run", SCENARIOS / "burger_sized_20hz.toml", *(a for s in settings for a in ("--set", s)), "--out", out
     )
     return code, json.loads((out / "metrics.json").read_text()), stderr
 
@@ -122,3 +122,25 @@ def test_a_slip_run_meets_its_motors_curve_alone_and_as_a_batch_row():
     )
     assert {k: row[k] for k in keys} == {k: alone[k] for k in keys}
     assert alone["torque_beyond_envelope_max"] < 1e-9 and alone["time_outside_torque_envelope"] == 0.0
+
+
+def test_a_robot_without_a_preset_or_motor_is_held_to_its_declared_top_speed(tmp_path, cli):
+    """The Burger-sized ideal robot has torque sources that turn its wheels at any speed, but declares the Burger's
+    top speed (``[robot] top_speed``): LTV/LQR's rims, max |v| + L |omega| read off the run's own series, went past
+    it (9.16 rad/s at the wheel, 153 % of an XL430's no-load speed) and the run says so; without the declaration
+    nothing bounds it, and nothing is said."""
+    import pyarrow.parquet as pq
+
+    short = ["--set", "simulation.duration=3", "--set", "simulation.metric_window=[0, 3]"]
+    out = tmp_path / "run"
+    code, _, stderr = cli("run", SCENARIOS / "burger_sized_20hz.toml", "--controller", "ltv_lqr", *short, "--out", out)
+    series = pq.read_table(out / "timeseries.parquet").to_pydict()
+    rim = float(np.max(np.abs(series["v"]) + 0.08 * np.abs(series["omega"])))
+    assert code == 0 and rim / 0.033 == pytest.approx(9.16, abs=0.01)
+    (warning,) = json.loads((out / "metrics.json").read_text())["warnings"]
+    assert warning["code"] == "speed_beyond_robot" and f"reached {rim:.3g} m/s" in warning["message"]
+    assert "0.220 m/s" in warning["message"] and "[speed_beyond_robot]" in stderr
+    path = tmp_path / "undeclared.toml"
+    path.write_text((SCENARIOS / "burger_sized_20hz.toml").read_text().replace("top_speed = 0.22", ""))
+    code, _, _ = cli("run", path, "--controller", "ltv_lqr", *short, "--out", tmp_path / "undeclared")
+    assert code == 0 and json.loads((tmp_path / "undeclared" / "metrics.json").read_text())["warnings"] == []

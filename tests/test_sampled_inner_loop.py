@@ -17,7 +17,7 @@ import ddtrack
 from ddtrack.feasibility import check, check_sampled_inner_loop, inner_loop_channels, sampled_growth
 from ddtrack.sim import remedy
 
-BURGER = SCENARIOS / "burger_20hz.toml"  # K_c = 10 1/s over a nominal model 20 % lighter than the true robot
+BURGER = SCENARIOS / "burger_sized_20hz.toml"  # K_c = 10 1/s over a nominal model 20 % lighter than the true robot
 PERIODS = 300  #: every run below lasts this many periods, so a controller's runs share one program
 
 

@@ -189,7 +189,7 @@ def test_a_turtlebot_runs_on_the_slip_plant_from_the_command_line(tmp_path, cli)
     out = tmp_path / "run"
     code, _, stderr = cli(
         "run",
-        SCENARIOS / "burger_20hz.toml",
+        SCENARIOS / "burger_sized_20hz.toml",
         "--controller",
         "backstepping",
         "--out",
@@ -207,7 +207,7 @@ def test_a_turtlebot_runs_on_the_slip_plant_from_the_command_line(tmp_path, cli)
     ("scenario", "overrides", "field"),
     [
         ("paper_line.toml", ["plant.model=slip"], "plant.wheel_inertia"),
-        ("burger_20hz.toml", [*BURGER[:2], "plant.com_offset=0.01"], "plant.caster_position"),
+        ("burger_sized_20hz.toml", [*BURGER[:2], "plant.com_offset=0.01"], "plant.caster_position"),
     ],
 )
 def test_bad_slip_input_exits_2_naming_the_field(tmp_path, cli, scenario, overrides, field):
@@ -218,7 +218,7 @@ def test_bad_slip_input_exits_2_naming_the_field(tmp_path, cli, scenario, overri
 
 def test_the_scenario_reads_the_floor_and_the_motor():
     scenario = ddtrack.load_scenario(
-        SCENARIOS / "burger_20hz.toml",
+        SCENARIOS / "burger_sized_20hz.toml",
         overrides=[*BURGER, "plant.floor_friction=0.5", "plant.slip_speed=0.02"],
         controller="backstepping",
     )

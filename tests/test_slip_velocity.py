@@ -31,7 +31,7 @@ GRIP = ["plant.model=slip_velocity", "plant.floor_friction=3", "plant.slip_speed
 
 def burger_scenario(*overrides: str):
     return ddtrack.load_scenario(
-        SCENARIOS / "burger_20hz.toml", overrides=[*BURGER, *overrides], controller="kinematic_backstepping"
+        SCENARIOS / "burger_sized_20hz.toml", overrides=[*BURGER, *overrides], controller="kinematic_backstepping"
     )
 
 
@@ -118,7 +118,7 @@ def test_a_preset_without_a_motor_exits_2_naming_plant_model_and_writes_nothing(
     sets = ['robot.preset="paper"', "plant.model=slip_velocity", "plant.wheel_inertia=0.005"]
     args = (arg for key in sets for arg in ("--set", key))
     code, _, stderr = cli(
-        "run", SCENARIOS / "burger_20hz.toml", "--controller", "kinematic_backstepping", *args, "--out", out
+        "run", SCENARIOS / "burger_sized_20hz.toml", "--controller", "kinematic_backstepping", *args, "--out", out
     )
     assert code == 2 and stderr.startswith("error: plant.model") and "'slip_velocity' needs the robot's motor" in stderr
     assert "turtlebot3_burger" in stderr  # the fix names the presets with motors

@@ -26,7 +26,7 @@ FAILED_IDENTIFICATION = (
 
 def test_run_reports_a_failed_identification(tmp_path, cli):
     out = tmp_path / "run"
-    code, stdout, stderr = cli("run", SCENARIOS / "burger_20hz.toml", *FAILED_IDENTIFICATION, "--out", out)
+    code, stdout, stderr = cli("run", SCENARIOS / "burger_sized_20hz.toml", *FAILED_IDENTIFICATION, "--out", out)
     assert code == 0  # the run itself is whole; what it means is qualified
     warnings = json.loads((out / "metrics.json").read_text())["warnings"]
     assert "identification_failed" in {w["code"] for w in warnings}
@@ -67,7 +67,7 @@ def test_mc_counts_warnings_per_controller(tmp_path, cli):
     out = tmp_path / "mc"
     code, stdout, _ = cli(
         "mc",
-        SCENARIOS / "burger_20hz.toml",
+        SCENARIOS / "burger_sized_20hz.toml",
         "-n",
         "2",
         "--controllers",
@@ -81,8 +81,8 @@ def test_mc_counts_warnings_per_controller(tmp_path, cli):
         out,
     )
     assert code == 0
-    assert "warnings: identification_failed x 2" in stdout
+    assert "warnings: identification_failed x 2" in stdout  # (and the rims' speed, on this Burger-sized robot)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["controllers"]["nn_adaptive_backstepping"]["warnings"]["identification_failed"] == 2
     codes = pq.read_table(out / "runs.parquet").column("warning_codes").to_pylist()
-    assert codes.count("identification_failed") == 2
+    assert sum("identification_failed" in code for code in codes) == 2

@@ -106,6 +106,28 @@ def traction_warnings(scenario: Any, metrics: dict) -> list[dict]:
     ]
 
 
+def speed_warnings(scenario: Any, columns: dict, metrics: dict) -> list[dict]:
+    """Say when the wheels' rims moved faster than the robot's top speed lets them (``Scenario.top_speeds``: a
+    preset's, its motors', or ``[robot] top_speed``), max |v +- L omega| over the run on the true robot's axle; not
+    where a motor model judged the wheels' speeds (:func:`motor_warnings` does)."""
+    top, _, what = scenario.top_speeds()
+    if top is None or "motor_no_load_speed" in metrics or not len(columns["v"]):
+        return []
+    turn = scenario.plant_params().half_axle * np.abs(columns["omega"])
+    rim = float(np.max(np.abs(columns["v"]) + turn))
+    if rim <= top:
+        return []
+    return [
+        {
+            "code": "speed_beyond_robot",
+            "message": (
+                f"the wheels' rims reached {significant(rim)} m/s (|v| + L |omega|), beyond the top speed of {what}, "
+                f"{significant(top)} m/s: the real robot could not move so; slow the reference or lower the gains"
+            ),
+        }
+    ]
+
+
 def motor_warnings(scenario: Any, metrics: dict) -> list[dict]:
     """Say when the run's wheels turned faster than the preset's motor can, or took torques it cannot give."""
     warnings = []

@@ -29,7 +29,7 @@ from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
-from .plausibility import motor_metrics, motor_warnings, traction_columns, traction_warnings
+from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
 from .precision import float64_in_this_thread
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import motor_or_none
@@ -342,6 +342,7 @@ def run_warnings(
         *feasibility.check(scenario),
         *traction_warnings(scenario, metrics),
         *motor_warnings(scenario, metrics),
+        *speed_warnings(scenario, columns, metrics),
         *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse]),
     ]
 

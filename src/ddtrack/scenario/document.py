@@ -15,6 +15,7 @@ from ._base import (
 from .controller_configs import BacksteppingConfig
 from .registry import ControllerConfig, ControllerField, TrajectoryConfig, TrajectoryField
 from .sections import (
+    NOT_PARAMETERS,
     DisturbanceConfig,
     InitialConfig,
     NoDisturbance,
@@ -124,6 +125,10 @@ class Scenario(_Section):
         speed = None if robot is None else robot.rated_speed
         yaw_rate = None if robot is None else robot.rated_yaw_rate
         what = "" if robot is None else f"a {robot.name} (robot.preset)"
+        if self.robot.top_speed is not None or self.robot.top_yaw_rate is not None:  # declared: the lower counts
+            speed = _lower(speed, self.robot.top_speed)
+            yaw_rate = _lower(yaw_rate, self.robot.top_yaw_rate)
+            what = what or "the robot (robot.top_speed, robot.top_yaw_rate)"
         motor = motor_or_none(self)
         if motor is not None:
             params = self.plant_params()
@@ -138,8 +143,13 @@ class Scenario(_Section):
         true = self.plant.model_dump(
             exclude={"floor_friction", "model", "velocity_pi", "slip_speed", "caster_position", "lag", "motor"}
         )  # the floor and model are not parameters
-        merged = self.robot.model_dump(exclude={"preset"}) | {k: v for k, v in true.items() if v is not None}
+        merged = self.robot.model_dump(exclude=NOT_PARAMETERS) | {k: v for k, v in true.items() if v is not None}
         return RobotParams(**merged)
+
+
+def _lower(a: float | None, b: float | None) -> float | None:
+    """The lower of two limits, None standing for none."""
+    return b if a is None else a if b is None else min(a, b)
 
 
 # --- registries (what `ddtrack list` shows) -------------------------------------------------------

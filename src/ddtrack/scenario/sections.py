@@ -80,6 +80,10 @@ class SimulationConfig(_Section):
 # --- [robot], [plant], [randomize] --------------------------------------------------------------
 
 
+#: the keys of [robot] that are not the model's parameters
+NOT_PARAMETERS = {"preset", "top_speed", "top_yaw_rate"}
+
+
 class RobotConfig(_Section):
     """The nominal model: what the controller believes."""
 
@@ -109,6 +113,14 @@ class RobotConfig(_Section):
             "[kg m^2]; 0: massless wheels (model.md §1.6)."
         ),
     )
+    top_speed: Positive | None = Field(
+        None,
+        description=(
+            "The robot's top speed [m/s] as its maker states it (a preset's and its motors' count too): a reference "
+            "beyond it is warned, and so is a run whose wheels' rims go faster (speed_beyond_robot)."
+        ),
+    )
+    top_yaw_rate: Positive | None = Field(None, description="The robot's top yaw rate [rad/s], likewise.")
 
     @model_validator(mode="before")
     @classmethod
@@ -127,7 +139,7 @@ class RobotConfig(_Section):
         return {**{k: v for k, v in values.items() if k in cls.model_fields}, **data}
 
     def params(self) -> RobotParams:
-        return RobotParams(**self.model_dump(exclude={"preset"}))
+        return RobotParams(**self.model_dump(exclude=NOT_PARAMETERS))
 
     def preset_robot(self) -> Any:
         """The :class:`~ddtrack.robots.RobotPreset` that ``preset`` names, or None."""
