@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 from collections import Counter
+from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,8 @@ def read_rows(path: Path) -> np.ndarray:
 
 
 def expected_stamps(columns) -> np.ndarray:
-    return round(START * NANOSECONDS) + np.round(columns["t"] * NANOSECONDS).astype(np.int64)
+    # the start as given on the command line, exactly: START * 1e9 in floats is 128 ns short
+    return int(Decimal(repr(START)) * NANOSECONDS) + np.round(columns["t"] * NANOSECONDS).astype(np.int64)
 
 
 def test_mcap_own_reader_sees_every_topic_once_per_period_with_frames_and_stamps(bag, columns):
@@ -112,7 +114,7 @@ def test_rosbags_reads_the_same_bag_and_its_rosbag2_metadata(bag, columns):
     with AnyReader([bag], default_typestore=typestore()) as reader:
         counts = Counter(c.topic for c in reader.connections for _ in range(c.msgcount))
         assert counts["/tf"] == len(columns["t"]) and counts["/path"] == 1
-        assert reader.start_time == round(START * NANOSECONDS)
+        assert reader.start_time == int(Decimal(repr(START)) * NANOSECONDS)
         paths = [
             reader.deserialize(raw, c.msgtype)
             for c, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic == "/path"])
@@ -130,6 +132,24 @@ def test_a_rosbag2_folder_holds_metadata_and_its_mcap(run_folder, tmp_path, cli)
     with AnyReader([folder], default_typestore=typestore()) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
     assert types["/cmd_vel"] == "geometry_msgs/msg/TwistStamped"
+
+
+def test_start_is_read_to_the_nanosecond(run_folder, tmp_path, cli):
+    """``--start 1700000000.123456789`` stamps t = 0 at exactly that nanosecond (as a float it was ...123456768), in
+    the header and the bag's log time alike; a start that is not a time is refused, naming the option."""
+    path = tmp_path / "exact.mcap"
+    assert cli("export", run_folder, "--to", path, "--start", "1700000000.123456789")[0] == 0
+    with path.open("rb") as file:
+        _, _, raw, decoded = next(
+            m
+            for m in make_reader(file, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+            if m[1].topic == "/odom"
+        )
+    assert raw.log_time == 1_700_000_000_123_456_789
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    for bad in ("soon", "-5", "nan", "inf"):
+        code, _, err = cli("export", run_folder, "--to", tmp_path / "bad.mcap", "--start", bad)
+        assert code == 2 and err.startswith("error: --start") and not (tmp_path / "bad.mcap").exists()
 
 
 def test_export_then_import_gives_back_the_reference_and_the_path(bag, columns, tmp_path, cli):

@@ -2,13 +2,24 @@
 
 from __future__ import annotations
 
-import math
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import click
 
 from ..errors import ConfigError
 from . import cli, overwrite_option
+
+
+def _seconds(text: str) -> Decimal:
+    """``--start`` as an exact decimal number of seconds after the epoch (a float would round the nanoseconds)."""
+    try:
+        seconds = Decimal(text.strip())
+    except InvalidOperation:
+        seconds = Decimal("NaN")
+    if not (seconds.is_finite() and seconds > 0):
+        raise ConfigError("--start", f"{text} is not a time after the epoch", "give seconds since 1970, e.g. 1.7e9")
+    return seconds
 
 
 @cli.command(short_help="Write a run folder as a ROS 2 bag (.mcap) or as CSV.")
@@ -24,20 +35,19 @@ from . import cli, overwrite_option
 )
 @click.option(
     "--start",
-    type=float,
     metavar="SECONDS",
-    help="Stamp of t = 0, in seconds since the epoch [default: when the run folder was written].",
+    help="Stamp of t = 0, in seconds since the epoch, read to the nanosecond (e.g. 1700000000.123456789) "
+    "[default: when the run folder was written].",
 )
 @click.option("--twist-stamped", is_flag=True, help="Publish /cmd_vel as TwistStamped instead of Twist.")
 @overwrite_option
-def export(folder: Path, to: Path, start: float | None, twist_stamped: bool, overwrite: bool) -> int:
+def export(folder: Path, to: Path, start: str | None, twist_stamped: bool, overwrite: bool) -> int:
     """Write the run folder RUN_DIR (from `ddtrack run`) as a ROS 2 bag, with /tf, /odom, /reference, /cmd_vel,
     /joint_states, /reference_path and /path, or as a CSV of its time series."""
     from ..ros import export_run
 
-    if start is not None and not (math.isfinite(start) and start > 0):
-        raise ConfigError("--start", f"{start} is not a time after the epoch", "give seconds since 1970, e.g. 1.7e9")
-    done = export_run(folder, to, start=start, twist_stamped=twist_stamped, overwrite=overwrite)
+    origin = None if start is None else _seconds(start)
+    done = export_run(folder, to, start=origin, twist_stamped=twist_stamped, overwrite=overwrite)
     if done.counts:
         topics = ", ".join(f"{topic} {count}" for topic, count in done.counts.items())
         click.echo(f"wrote {to}: {done.rows} control periods; messages: {topics}")

@@ -25,6 +25,7 @@ import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 from typing import IO, Any
 
@@ -80,13 +81,19 @@ class Export:
 
 
 def export_run(
-    folder: Path, to: Path, *, start: float | None = None, twist_stamped: bool = False, overwrite: bool = False
+    folder: Path,
+    to: Path,
+    *,
+    start: float | Decimal | None = None,
+    twist_stamped: bool = False,
+    overwrite: bool = False,
 ) -> Export:
     """Write the run folder ``folder`` to ``to``: ``.mcap`` (one MCAP file, a rosbag2 storage file), ``.csv``
     (the time series, units in the header), or a path without suffix (a rosbag2 folder: ``metadata.yaml`` and
     its MCAP file, what ``ros2 bag record`` writes).
 
-    ``start`` [s since the epoch] stamps t = 0; by default the time the run folder was written. The file
+    ``start`` [s since the epoch] stamps t = 0, read to the nanosecond when given as a :class:`~decimal.Decimal` (a
+    float holds about 0.2 µs at today's epoch times); by default the time the run folder was written. The file
     appears whole or not at all; an existing ``to`` is replaced only with ``overwrite`` (and a folder only when
     it is a rosbag2 folder).
     """
@@ -118,8 +125,11 @@ def check_target(to: Path, *, overwrite: bool, option: str = "--to") -> None:
         raise ConfigError(option, f"'{to}' is a folder that is not a rosbag2 folder", "give another path")
 
 
-def _origin_nanoseconds(folder: Path, start: float | None) -> int:
-    """t = 0 in nanoseconds since the epoch: ``start``, else when the run folder was written."""
+def _origin_nanoseconds(folder: Path, start: float | Decimal | None) -> int:
+    """t = 0 in nanoseconds since the epoch: ``start`` (a Decimal exactly, to the nearest nanosecond), else when
+    the run folder was written."""
+    if isinstance(start, Decimal):
+        return int((start * NANOSECONDS).to_integral_value(rounding=ROUND_HALF_EVEN))
     if start is not None:
         return round(start * NANOSECONDS)
     marker = read_marker(folder) or {}
