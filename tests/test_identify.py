@@ -79,8 +79,8 @@ def test_a_log_that_never_turns_while_driving_says_the_coupling_terms_are_not_se
     [
         (lambda log: SpeedLog(log.t[:50], log.command[:50], log.speed[:50], "log"), "has 50 samples"),
         (lambda log: SpeedLog(log.t, log.command * [1, 0], log.speed, "log"), "omega command never changes"),
-        (lambda log: SpeedLog(log.t[::-1], log.command, log.speed, "log"), "time does not increase at sample 1"),
-        (lambda log: SpeedLog(log.t, log.command, log.speed * np.nan, "log"), "NaN"),
+        (lambda log: SpeedLog(log.t[::-1], log.command, log.speed, "log"), "sample 1: time does not increase"),
+        (lambda log: SpeedLog(log.t, log.command, log.speed * np.nan, "log"), "sample 0: v is nan, not a number"),
     ],
 )
 def test_logs_that_cannot_identify_are_refused(change, message):
@@ -152,6 +152,44 @@ def test_identify_refuses_a_table_without_the_columns_and_writes_nothing(tmp_pat
     out = tmp_path / "fit.toml"
     code, _, err = cli("identify", table, "--out", out)
     assert code == 2 and "lacks the columns v_cmd, omega_cmd" in err and not out.exists()
+
+
+def test_every_error_on_a_log_names_its_line_or_message(tmp_path, cli):
+    """A table's bad cell, short row, missing value or step back in time is named by its line (a CSV) or row (a
+    Parquet table); a bag's by the messages it came from; exit 2, nothing written."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    log = lag_log(THETA, PLAN, seed=0, noise=(0.005, 0.01))
+    lines = ["# a comment line", "t [s],v_cmd,omega_cmd,v,omega"]
+    lines += [
+        ",".join(repr(float(x)) for x in (t, *c, *m)) for t, c, m in zip(log.t, log.command, log.speed, strict=True)
+    ]
+    out = tmp_path / "fit.toml"
+    cells = lines[12].split(",")  # line 13 of the file, the 11th sample (a comment and the header before it)
+    cases = {
+        "abc": (",".join([*cells[:4], "abc"]), "line 13, column omega: 'abc' is not a number"),
+        "short": (",".join(cells[:3]), "line 13: 3 cells under a header of 5"),
+        "nan": (",".join([*cells[:3], "nan", cells[4]]), "line 13: v is nan, not a number"),
+        "back": (",".join(["0.01", *cells[1:]]), "line 13: time does not increase (t = 0.01 s after"),
+    }
+    for name, (row, expected) in cases.items():
+        table = tmp_path / f"{name}.csv"
+        table.write_text("\n".join([*lines[:12], row, *lines[13:]]) + "\n")
+        code, _, err = cli("identify", table, "--out", out)
+        assert code == 2 and expected in err and not out.exists(), (name, err)
+    columns = {"t": log.t, "v_cmd": log.command[:, 0], "omega_cmd": log.command[:, 1], "v": log.speed[:, 0]}
+    speeds = log.speed[:, 1].copy()
+    speeds[6] = np.inf
+    pq.write_table(pa.table(columns | {"omega": speeds}), tmp_path / "log.parquet")
+    code, _, err = cli("identify", tmp_path / "log.parquet", "--out", out)
+    assert code == 2 and "row 7: omega is inf, not a number" in err
+    broken = SpeedLog(log.t, log.command.copy(), log.speed, "log")
+    broken.command[4, 0] = np.nan
+    write_log_bag(tmp_path / "bag", broken)
+    code, _, err = cli("identify", tmp_path / "bag", "--out", out)
+    assert code == 2 and "/odom message 5 (stamp 1700000000" in err and "under /cmd_vel message 5" in err, err
+    assert "the v command is nan, not a number" in err
 
 
 def test_excite_writes_a_csv_and_a_bag_of_timed_commands(tmp_path, cli):

@@ -49,6 +49,11 @@ class SpeedLog:
     command: np.ndarray  #: (n, 2) the input
     speed: np.ndarray  #: (n, 2)
     source: str = ""
+    rows: tuple[str, ...] = ()  #: where each sample is in the file ("line 12", "/odom message 7"), for errors
+
+    def where(self, k: int) -> str:
+        """Where sample ``k`` is in the file the log was read from (else "sample k")."""
+        return self.rows[k] if len(self.rows) > k else f"sample {k}"
 
 
 @dataclass(frozen=True)
@@ -154,11 +159,20 @@ def checked(log: SpeedLog, input_names: tuple[str, str]) -> tuple[np.ndarray, np
         raise ValueError(f"t (n,), input and speed (n, 2) expected, got {t.shape}, {inputs.shape}, {speed.shape}")
     if t.size < MIN_SAMPLES:
         raise ConfigError("LOG", f"{log.source} has {t.size} samples", f"a fit needs at least {MIN_SAMPLES}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(inputs)) and np.all(np.isfinite(speed))):
-        raise ConfigError("LOG", f"{log.source} has NaN or infinite values", "drop those rows")
+    values = np.column_stack([t, inputs, speed])
+    if not np.all(np.isfinite(values)):
+        k, column = (int(i) for i in np.argwhere(~np.isfinite(values))[0])
+        name = ("t", *input_names, "v", "omega")[column]
+        raise ConfigError(
+            "LOG", f"{log.source}, {log.where(k)}: {name} is {values[k, column]}, not a number", "drop that sample"
+        )
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise ConfigError("LOG", f"{log.source}: time does not increase at sample {k} (t = {t[k]:.9g} s)", "")
+        raise ConfigError(
+            "LOG",
+            f"{log.source}, {log.where(k)}: time does not increase (t = {t[k]:.9g} s after {t[k - 1]:.9g} s)",
+            "sort the samples by time, and drop repeated ones",
+        )
     for i, name in enumerate(input_names):
         if np.ptp(inputs[:, i]) == 0.0:
             raise ConfigError(

@@ -57,7 +57,7 @@ def read_speed_log(
         else:
             measured_at, speeds = _wheel_joint_speeds(reader, joint_topic, *wheels)
             measured = f"{joint_topic} speeds"
-    return _held_inputs(path, sent, values, measured_at, speeds, f"'{path}' ({inputs}, {measured})")
+    return _held_inputs(path, sent, values, measured_at, speeds, (inputs, measured))
 
 
 def _stamped(messages: list) -> np.ndarray:
@@ -115,16 +115,28 @@ def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _held_inputs(
-    path: Path, sent: np.ndarray, values: np.ndarray, measured_at: np.ndarray, speeds: np.ndarray, source: str
+    path: Path,
+    sent: np.ndarray,
+    values: np.ndarray,
+    measured_at: np.ndarray,
+    speeds: np.ndarray,
+    topics: tuple[str, str],
 ) -> SpeedLog:
     """At each measurement's stamp, its (v, omega) and the input last sent at or before it (held until the next);
-    samples before the first input are dropped."""
+    samples before the first input are dropped. ``topics``: (the inputs', the measurements'), which name each
+    sample's messages in errors."""
     latest = np.searchsorted(sent, measured_at, side="right") - 1
     valid = latest >= 0
     if valid.sum() == 0:
         raise ConfigError("LOG", f"'{path}': every measurement comes before the first input", "")
     t = (measured_at[valid] - measured_at[valid][0]) / 1e9
-    return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source)
+    inputs, measured = topics
+    rows = tuple(
+        f"{measured} message {i + 1} (stamp {measured_at[i]} ns), under {inputs} message {latest[i] + 1} in stamp order"
+        for i in np.flatnonzero(valid)
+    )
+    source = f"'{path}' ({inputs}, {measured})"
+    return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source, rows=rows)
 
 
 def read_motor_log(path: Path) -> MotorLog:
@@ -140,15 +152,17 @@ def read_motor_log(path: Path) -> MotorLog:
             "message carries",
             "write a table of t, u_r, u_l, v, omega (and i_r, i_l) from your driver's topics",
         )
-    columns = _table_columns(path)
-    speeds = _table_log(path, INPUT_COLUMNS["motor"], columns)
+    table = _table_columns(path)
+    columns = table[0]
+    speeds = _table_log(path, INPUT_COLUMNS["motor"], table)
     if "i_r" not in columns or "i_l" not in columns:
         return MotorLog(speeds)
     return MotorLog(speeds, np.column_stack([np.asarray(columns[name], dtype=float) for name in ("i_r", "i_l")]))
 
 
-def _table_columns(path: Path) -> dict[str, np.ndarray]:
-    """A table's columns by name (``name [unit]`` headers read as ``name``)."""
+def _table_columns(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """A table's columns by name (``name [unit]`` headers read as ``name``), and where each row is ("line 12" of a
+    CSV, "row 12" of a Parquet table, counting from 1)."""
     if not path.is_file():
         raise ConfigError("LOG", f"'{path}' does not exist", "give a bag, a .csv or a .parquet file")
     if path.suffix.lower() == ".parquet":
@@ -158,12 +172,15 @@ def _table_columns(path: Path) -> dict[str, np.ndarray]:
             table = pq.read_table(path)
         except (OSError, ValueError) as exc:
             raise ConfigError("LOG", f"'{path}' cannot be read as Parquet ({exc})") from None
-        return {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
+        columns = {name.split(" [")[0]: table.column(name).to_numpy() for name in table.column_names}
+        return columns, [f"row {i + 1}" for i in range(table.num_rows)]
     return _csv_columns(path)
 
 
-def _table_log(path: Path, inputs: tuple[str, str], columns: dict[str, np.ndarray] | None = None) -> SpeedLog:
-    columns = _table_columns(path) if columns is None else columns
+def _table_log(
+    path: Path, inputs: tuple[str, str], table: tuple[dict[str, np.ndarray], list[str]] | None = None
+) -> SpeedLog:
+    columns, rows = _table_columns(path) if table is None else table
     missing = [name for name in ("t", *inputs, "v", "omega") if name not in columns]
     if missing:
         raise ConfigError(
@@ -177,23 +194,31 @@ def _table_log(path: Path, inputs: tuple[str, str], columns: dict[str, np.ndarra
         command=np.column_stack([column(inputs[0]), column(inputs[1])]),
         speed=np.column_stack([column("v"), column("omega")]),
         source=f"'{path}'",
+        rows=tuple(rows),
     )
 
 
-def _csv_columns(path: Path) -> dict[str, np.ndarray]:
-    """A CSV's columns by name (``name [unit]`` headers read as ``name``; ``#`` lines skipped)."""
+def _csv_columns(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """A CSV's columns by name (``name [unit]`` headers read as ``name``; ``#`` lines skipped), and each row's line
+    in the file; a cell that is not a number, or a row of another length than the header, is named by its line."""
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError("LOG", f"'{path}' cannot be read ({exc})") from None
-    rows = [row for row in csv.reader(io.StringIO(text)) if row and not row[0].lstrip().startswith("#")]
-    if len(rows) < 2:
+    reader = csv.reader(io.StringIO(text))
+    numbered = [(reader.line_num, row) for row in reader if row and not row[0].lstrip().startswith("#")]
+    if len(numbered) < 2:
         raise ConfigError("LOG", f"'{path}' has no data rows", "give a header line and one row per sample")
-    names = [cell.split(" [")[0].strip() for cell in rows[0]]
-    try:
-        values = np.array(rows[1:], dtype=float)
-    except ValueError:
-        raise ConfigError("LOG", f"'{path}' has a cell that is not a number, or rows of unequal length") from None
-    if values.ndim != 2 or values.shape[1] != len(names):
-        raise ConfigError("LOG", f"'{path}': rows of {values.shape[-1]} cells under a header of {len(names)}")
-    return {name: values[:, i] for i, name in enumerate(names)}
+    names = [cell.split(" [")[0].strip() for cell in numbered[0][1]]
+    values = np.empty((len(numbered) - 1, len(names)))
+    for i, (line, row) in enumerate(numbered[1:]):
+        if len(row) != len(names):
+            raise ConfigError("LOG", f"'{path}', line {line}: {len(row)} cells under a header of {len(names)}")
+        for j, cell in enumerate(row):
+            try:
+                values[i, j] = float(cell)
+            except ValueError:
+                raise ConfigError(
+                    "LOG", f"'{path}', line {line}, column {names[j]}: '{cell}' is not a number"
+                ) from None
+    return {name: values[:, i] for i, name in enumerate(names)}, [f"line {line}" for line, _ in numbered[1:]]
