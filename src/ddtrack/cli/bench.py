@@ -59,7 +59,8 @@ def _names(controllers: str | None) -> list[str] | None:
     multiple=True,
     metavar="SECTION.KEY=VALUE",
     help="Override a value in every cell (or every --scenario file), last: e.g. a shorter simulation.duration to "
-    "try a suite quickly. A changed study is a new study: it does not resume the folder's runs.",
+    "try a suite quickly. Other overrides make another study: a folder of the first is replaced only with "
+    "--overwrite.",
 )
 @click.option(
     "--out",
