@@ -170,13 +170,13 @@ def check_units(scenario: Any) -> None:
         gyration = math.sqrt(params.inertia / params.mass) / params.half_axle
         if not GYRATION_RANGE[0] <= gyration <= GYRATION_RANGE[1]:
             raise ConfigError(
-                f"{section}.mass, {section}.inertia",
+                f"{section}.mass, {section}.inertia, {section}.half_axle",
                 (
                     f"{params.mass:g} kg with inertia {params.inertia:g} kg m^2 gives a radius of gyration "
                     f"{math.sqrt(params.inertia / params.mass):.3g} m, {gyration:.3g} times the half axle "
                     f"{params.half_axle:g} m; a robot's lies within about 0.2 to 2 times"
                 ),
-                "masses are in kg (not g) and inertias in kg m^2 (about m (0.5 L)^2 for a compact robot)",
+                "masses are in kg (not g), inertias in kg m^2 (about m (0.5 L)^2 for a compact robot), lengths in m",
             )
 
 

@@ -1,0 +1,213 @@
+"""What a robot preset is: a motor's datasheet, a URDF's links, and :class:`RobotPreset` with its sources."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:
+    from ..model.params import RobotParams
+
+GRAVITY = 9.80665  #: standard gravity [m/s^2], the value ``ddtrack.model.traction`` uses
+
+InputKind = Literal["torque", "voltage", "velocity"]
+
+
+def rpm(value: float) -> float:
+    """Convert revolutions per minute to rad/s."""
+    return value * 2.0 * math.pi / 60.0
+
+
+@dataclass(frozen=True)
+class MotorDatasheet:
+    """A geared motor as its datasheet gives it, all figures at the output shaft.
+
+    The field names match the arguments of a motor model built from a datasheet (voltage, stall torque and
+    current, no-load speed and current).
+
+    Attributes
+    ----------
+    name : str
+        The motor's model name.
+    voltage : float
+        Voltage the figures below hold at [V].
+    stall_torque : float
+        Output torque at stall [N m].
+    stall_current : float
+        Current at stall [A].
+    no_load_speed : float
+        Output speed with no load [rad/s].
+    no_load_current : float
+        Current with no load [A] (0 where the datasheet gives none; the preset's assumptions say so).
+    gear_ratio : float
+        Gear reduction, motor turns per output turn.
+    encoder_counts : int
+        Encoder counts per output revolution.
+    source : str
+        Where the figures come from.
+    """
+
+    name: str
+    voltage: float
+    stall_torque: float
+    stall_current: float
+    no_load_speed: float
+    no_load_current: float
+    gear_ratio: float
+    encoder_counts: int
+    source: str
+
+
+@dataclass(frozen=True)
+class UrdfLink:
+    """One URDF link as far as yaw matters: name, mass [kg], centre of mass (x, y) [m] in the base frame (axle
+    midpoint at the origin, x forward) and yaw inertia about its own centre of mass [kg m^2] (0: a point mass)."""
+
+    name: str
+    mass: float
+    x: float
+    y: float
+    yaw_inertia: float = 0.0
+
+
+def composite_body(links: tuple[UrdfLink, ...]) -> tuple[float, float, float]:
+    """Mass, centre-of-mass x and yaw inertia about that centre of mass, of rigidly joined links (parallel axis).
+
+    Parameters
+    ----------
+    links : tuple of UrdfLink
+        The links of the body.
+
+    Returns
+    -------
+    tuple of float
+        ``(mass [kg], x_com [m], yaw inertia about the centre of mass [kg m^2])``. The y of the centre of mass
+        is 0 for the symmetric robots here and enters the inertia through each link's offset.
+    """
+    mass = sum(link.mass for link in links)
+    x_com = sum(link.mass * link.x for link in links) / mass
+    y_com = sum(link.mass * link.y for link in links) / mass
+    inertia = sum(link.yaw_inertia + link.mass * ((link.x - x_com) ** 2 + (link.y - y_com) ** 2) for link in links)
+    return mass, x_com, inertia
+
+
+@dataclass(frozen=True)
+class RobotPreset:
+    """A named real robot: the model's parameters, what a richer plant needs, and where every number comes from.
+
+    Attributes
+    ----------
+    name : str
+        The preset's name, as ``robot.preset`` takes it.
+    description : str
+        One line on the robot.
+    params : Mapping[str, float]
+        Fields of :class:`ddtrack.model.RobotParams`: mass, inertia, com_offset, wheel_radius, half_axle,
+        max_torque, viscous_friction, coulomb_friction.
+    wheel_inertia : float
+        Spin inertia of each wheel with its geared motor, wheel + N^2 J_rotor [kg m^2].
+    caster_position : float or None
+        Body x of the caster [m], on the same side of the axle as the centre of mass; None where unknown.
+    max_speed : float or None
+        Top forward speed [m/s]; None where nothing bounds it (torque sources with no back-EMF).
+    max_yaw_rate : float or None
+        Top yaw rate [rad/s]; None where nothing bounds it.
+    motor : MotorDatasheet or None
+        The drive motor's datasheet; None where none is published.
+    lag : tuple of 6 floats or None
+        theta of the identified velocity-lag model (docs/model.md); None where none is identified.
+    input : {"torque", "voltage", "velocity"}
+        What the robot's driver takes.
+    sources : Mapping[str, str]
+        Field name -> where its value comes from.
+    assumptions : Mapping[str, str]
+        Field name -> why its value was chosen or how it was derived.
+    rated_limits : tuple of 2 floats or None
+        The maker's top speed [m/s] and yaw rate [rad/s] whatever the motors' voltage (the firmware's limits);
+        None: ``max_speed`` and ``max_yaw_rate`` are the maker's. A scenario's top speeds are these and the
+        motors' no-load speed at its supply voltage (``Scenario.top_speeds``).
+    """
+
+    name: str
+    description: str
+    params: Mapping[str, float]
+    wheel_inertia: float
+    caster_position: float | None
+    max_speed: float | None
+    max_yaw_rate: float | None
+    motor: MotorDatasheet | None
+    lag: tuple[float, float, float, float, float, float] | None
+    input: InputKind
+    sources: Mapping[str, str]
+    assumptions: Mapping[str, str]
+    rated_limits: tuple[float, float] | None = None
+
+    @property
+    def rated_speed(self) -> float | None:
+        """The maker's top speed [m/s] (:attr:`rated_limits`, else :attr:`max_speed`)."""
+        return self.max_speed if self.rated_limits is None else self.rated_limits[0]
+
+    @property
+    def rated_yaw_rate(self) -> float | None:
+        """The maker's top yaw rate [rad/s] (:attr:`rated_limits`, else :attr:`max_yaw_rate`)."""
+        return self.max_yaw_rate if self.rated_limits is None else self.rated_limits[1]
+
+    def robot_params(self) -> RobotParams:
+        """The preset as :class:`ddtrack.model.RobotParams`: the fields it has; the others keep their defaults."""
+        import dataclasses
+
+        from ..model.params import RobotParams
+
+        names = {f.name for f in dataclasses.fields(RobotParams)}
+        extra = {"wheel_inertia": self.wheel_inertia}
+        return RobotParams(**{k: v for k, v in {**self.params, **extra}.items() if k in names})
+
+    def wheel_load(self) -> float:
+        """Static normal load on each drive wheel [N]: m g (1 - d / l_c) / 2, or m g / 2 without a caster position."""
+        weight = self.params["mass"] * GRAVITY
+        if self.caster_position is None:
+            return weight / 2.0
+        return weight * (1.0 - self.params["com_offset"] / self.caster_position) / 2.0
+
+    def friction_at_torque_limit(self) -> float:
+        """Floor friction a wheel needs at full torque from rest, straight ahead (real floors give 0.3-1.0): the
+        floor's force F over the wheel's load, where the torque first spins the wheel up, J_w a / R^2 of it, so
+        F = (max_torque / R) / (1 + 2 J_w / (m R^2)) with a = 2 F / m."""
+        mass, radius = self.params["mass"], self.params["wheel_radius"]
+        force = self.params["max_torque"] / radius / (1.0 + 2.0 * self.wheel_inertia / (mass * radius**2))
+        return force / self.wheel_load()
+
+
+def markdown_table(preset: RobotPreset) -> str:
+    """The preset as a Markdown table: every number with its source or assumption (docs/robots.md embeds it).
+
+    Parameters
+    ----------
+    preset : RobotPreset
+        The preset.
+
+    Returns
+    -------
+    str
+        The table, one row per field.
+    """
+    values: dict[str, object] = dict(preset.params)
+    values |= {
+        "wheel_inertia": preset.wheel_inertia,
+        "caster_position": preset.caster_position,
+        "max_speed": preset.max_speed,
+        "max_yaw_rate": preset.max_yaw_rate,
+        "motor": preset.motor.name if preset.motor else None,
+        "lag": preset.lag,
+        "input": preset.input,
+    }
+    rows = ["| field | value | source, or why |", "|---|---|---|"]
+    for name, value in values.items():
+        shown = f"{value:.6g}" if isinstance(value, float) else "none" if value is None else str(value)
+        note = preset.sources.get(name, "")
+        if name in preset.assumptions:
+            note = f"{note}; {preset.assumptions[name]}" if note else preset.assumptions[name]
+        rows.append(f"| `{name}` | {shown} | {note} |")
+    return "\n".join(rows)
