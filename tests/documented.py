@@ -69,7 +69,7 @@ ELSEWHERE = {
     ("docs/guide.md", ".venv/bin/pip install -e '.[test]' && .venv/bin/python -m pytest"): _CI,
     ("examples/plugin/README.md", "pip install examples/plugin"): _PLUGIN,
     ("examples/plugin/README.md", "ddtrack list controllers"): _PLUGIN,
-    ("examples/plugin/README.md", "ddtrack mc scenarios/paper_line.toml --controller integral_kanayama -n 3"): _PLUGIN,
+    ("examples/plugin/README.md", "ddtrack mc scenarios/paper_line.toml --controllers integral_kanayama -n 3"): _PLUGIN,
 }
 
 
