@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from ..errors import ConfigError, did_you_mean
+from .datasheets import GRAVITY, InputKind, MotorDatasheet, RobotPreset, UrdfLink, composite_body, markdown_table, rpm
 from .paper import PAPER
 from .pioneer import PIONEER_3DX, PIONEER_3DX_THETA
-from .preset import GRAVITY, InputKind, MotorDatasheet, RobotPreset, UrdfLink, composite_body, markdown_table, rpm
 from .turtlebot3 import (
     BAM_ARMATURE_MX64,
     BAM_ARMATURE_XL330,

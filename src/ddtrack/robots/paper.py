@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .preset import RobotPreset
+from .datasheets import RobotPreset
 
 _PAPER = "the paper (m = 10 kg, J = 0.56 kg m^2)"
 _FIERRO = (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .preset import GRAVITY, RobotPreset
+from .datasheets import GRAVITY, RobotPreset
 
 _ADEPT = (
     "Adept MobileRobots Pioneer 3-DX specifications (9 kg; 19 cm wheels; 1.2 m/s; 300 deg/s), as reproduced in the "

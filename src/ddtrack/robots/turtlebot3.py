@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .preset import MotorDatasheet, RobotPreset, UrdfLink, composite_body, rpm
+from .datasheets import MotorDatasheet, RobotPreset, UrdfLink, composite_body, rpm
 
 _TURTLEBOT3_PAGE = "ROBOTIS e-Manual, TurtleBot3 specifications (https://emanual.robotis.com/docs/en/platform/turtlebot3/specifications/)"
 _DXL = "ROBOTIS e-Manual, TurtleBot3 appendix DYNAMIXEL (https://emanual.robotis.com/docs/en/platform/turtlebot3/appendix_dynamixel/)"
