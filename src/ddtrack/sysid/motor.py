@@ -29,7 +29,8 @@ from ..model.motors import DCMotor
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
 from .body import body_model, equivalent_robot
-from .fit import SpeedFit, SpeedLog, SpeedModel, delayed_inputs, identify, propagated, simulate
+from .fit import SpeedFit, SpeedLog, SpeedModel, identify, propagated, simulate
+from .schedule import held_at
 
 NAMES = ("kA_v", "kA_md", "kA_w", "kV", "kS")
 
@@ -117,9 +118,10 @@ def identify_motor(
     if log.current is None:
         return MotorFit(drive, None)
     t = np.asarray(log.speeds.t, dtype=float)
-    voltage = delayed_inputs(np.asarray(log.speeds.command, dtype=float), round(drive.delay / np.median(np.diff(t))))
+    sent = log.speeds.inputs()
+    voltage = held_at(t, *sent, drive.delay)
     measured = np.asarray(log.speeds.speed, dtype=float)
-    predicted = simulate(model, drive.params, t, voltage, measured[0], False, drive.substeps)
+    predicted = simulate(model, drive.params, t, None, measured[0], False, drive.substeps, sent=sent, delay=drive.delay)
     wheels = [
         np.column_stack(wheel_speeds(s[:, 0], s[:, 1], wheel_radius=wheel_radius, half_axle=half_axle))
         for s in (measured, predicted)
