@@ -64,7 +64,7 @@ def test_the_motor_model_is_recovered_within_its_reported_uncertainty():
     for seed in range(10):  # 50 seeds are published (bench/identify_motor_coverage.py)
         log = motor_log(truth, MOTOR, *PLAN, noise=(0.002, 0.01), current_noise=0.005, delay=0.02, seed=seed)
         fit = identify_motor(log, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.02)
-        assert fit.drive.delay == pytest.approx(0.02) and fit.armature is not None
+        assert 0.02 - 4 * fit.drive.delay_std <= fit.drive.delay <= 0.02 and fit.armature is not None
         z_drive.append((fit.drive.params - drive) / fit.drive.std)
         fitted = np.array([fit.armature.resistance, fit.armature.back_emf])
         z_armature.append((fitted - armature) / np.array(fit.armature.std))

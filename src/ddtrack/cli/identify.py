@@ -235,18 +235,30 @@ def identify(
     lines += _fitted_lines(described, fit)
     if model == "lag":
         lag_v, lag_w = lag_time_constants(fit.params)
-        lines.append(f"#   lags {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); command delay {fit.delay:.3g} s")
+        lines.append(f"#   lags {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); command delay {_delay(fit)}")
     else:
-        lines.append(f"#   torque delay {fit.delay:.3g} s; the wheels' spin inertia is folded into mass and inertia")
+        lines.append(f"#   torque delay {_delay(fit)}; the wheels' spin inertia is folded into mass and inertia")
     lines += [*_held_out_lines(fit), "[plant]"]
     if model == "lag":
         lines += ['model = "lag"', "lag = [" + ", ".join(repr(float(value)) for value in fit.params) + "]"]
     else:
         lines += _keyed(plant_keys(fit), plant_std(fit))
         lines += [f"wheel_radius = {radius!r}", f"half_axle = {half!r}"]
-    if fit.delay > 0:
-        lines += ["[sensing]", f"actuation_delay = {fit.delay!r}"]
+    lines += _sensing_lines(fit)
     return _report(lines, fit, out)
+
+
+def _delay(fit: SpeedFit) -> str:
+    """The fitted input delay with its 95 % interval, to the 0.1 ms the fragment keeps."""
+    return f"{fit.delay:.4f} +- {1.96 * fit.delay_std:.2g} s"
+
+
+def _sensing_lines(fit: SpeedFit) -> list[str]:
+    """The fragment's [sensing] section: the fitted delay to 0.1 ms (finer than any log resolves), none if 0."""
+    delay = round(fit.delay, 4)
+    if delay <= 0:
+        return []
+    return ["[sensing]", f"actuation_delay = {delay!r}  # +- {1.96 * fit.delay_std:.2g} s (95 %), fitted"]
 
 
 def _report(lines: list[str], fit: SpeedFit, out: Path | None) -> int:
@@ -328,9 +340,7 @@ def _identify_motor(
         for name, unit, value, sigma in zip(SYSID_NAMES, SYSID_UNITS, sysid, sysid_sigma, strict=True)
     ]
     lag_v, lag_w = time_constants(fit.drive.params, wheel_radius=radius, half_axle=half)
-    lines.append(
-        f"#   time constants {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); voltage delay {fit.drive.delay:.3g} s"
-    )
+    lines.append(f"#   time constants {lag_v:.3g} s (v) and {lag_w:.3g} s (omega); voltage delay {_delay(fit.drive)}")
     step = float(np.median(np.diff(motor_log.speeds.t)))
     if min(lag_v, lag_w) < step:
         notes.append(
@@ -343,8 +353,7 @@ def _identify_motor(
     lines += ["[plant]", *_keyed(plant, std)]
     lines += [f"wheel_radius = {radius!r}", f"half_axle = {half!r}", "[plant.motor]"]
     lines += _keyed(motor, {key.removeprefix("motor."): value for key, value in std.items() if "motor." in key})
-    if fit.drive.delay > 0:
-        lines += ["[sensing]", f"actuation_delay = {fit.drive.delay!r}"]
+    lines += _sensing_lines(fit.drive)
     return _report(lines, fit.drive, out)
 
 

@@ -8,7 +8,7 @@ from .fit import SpeedFit, SpeedLog, SpeedModel, identify
 from .lag import LAG, identify_lag, lag_time_constants, simulate_speeds
 from .logs import read_motor_log, read_speed_log
 from .motor import ArmatureFit, MotorFit, MotorLog, drive_constants, identify_motor, motor_model, plant_fragment
-from .synthetic import body_log, lag_log, motor_log, reversing_steps, torque_plan
+from .synthetic import body_log, lag_log, motor_log, reversing_steps, timed_lag_log, torque_plan
 
 __all__ = [
     "LAG",
@@ -37,5 +37,6 @@ __all__ = [
     "read_speed_log",
     "reversing_steps",
     "simulate_speeds",
+    "timed_lag_log",
     "torque_plan",
 ]

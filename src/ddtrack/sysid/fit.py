@@ -4,7 +4,7 @@ A model here maps a parameter vector, the body speeds (v, omega) and a two-chann
 wheel torques, or voltages) to the speeds' rates, and is linear in its parameters once the rates are known. The
 inputs keep their own stamps (:mod:`ddtrack.sysid.schedule`): each acts from its stamp plus a delay until the next
 one does, whatever the measurements' rate. The delay is first screened on a grid of half samples by the equation
-error (linear least squares on Savitzky-Golay smoothed speeds and derivatives), which also starts the parameters;
+error (linear least squares on the model's equations integrated over short spans), which also starts the parameters;
 then an output-error fit (:mod:`ddtrack.sysid.output_error`) moves the model's parameters and the delay together,
 a continuous quantity with its own standard error. The measured speeds are read either as instants or as means
 over each sample interval (odometry's encoder increments); the reading with the smaller residual wins. The last
@@ -20,10 +20,9 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.signal import savgol_filter
 
 from ..errors import ConfigError
-from .output_error import SUBSTEPS, WINDOW, Record, output_error
+from .output_error import SUBSTEPS, WINDOW, OutputError, Record, output_error
 from .schedule import held_at, schedule, simulate_jit, slots_for
 
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
@@ -35,6 +34,8 @@ STIFF_STEP = 0.5
 MIN_SAMPLES = 80
 #: [s] how far the screening looks for speeds that answer their inputs before they were sent (clocks apart)
 LEAD = 1.0
+#: [s] the equation error's equations are integrated over spans this long (at least two samples)
+SPAN = 0.05
 
 __all__ = ["SUBSTEPS", "WINDOW"]
 
@@ -117,9 +118,9 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
     n_fit = round(len(t) * (1.0 - HELD_OUT))
     record = Record(t[:n_fit], speed[:n_fit], sent_t, sent, slots_for(t, sent_t))
     delay = screened_delay(model, record, max_delay, log.source)
+    longest = float(np.diff(t).max())
     start = equation_error(model, record.t, held_at(record.t, sent_t, sent, delay), record.speed)
     fits = {}
-    longest = float(np.diff(t).max())
     for mean in (False, True):  # both readings of the speeds: instantaneous or interval means
         needed = substeps_for(model, start, speed, longest)
         # a poor start (derivatives of a fast drive smoothed away) can look stiff: try fewer steps first
@@ -167,7 +168,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
         windows=best.windows,
         covariance=best.covariance,
         substeps=best.substeps,
-        notes=(*log.notes, *unseparated(model, best.params, best.std)),
+        notes=(*log.notes, *unseparated(model, best.params, best.std), *ambiguous_reading(fits)),
         delay_std=best.delay_std,
     )
 
@@ -244,14 +245,28 @@ def screened_delay(model: SpeedModel, record: Record, max_delay: float, source: 
 def equation_error(
     model: SpeedModel, t: np.ndarray, inputs: np.ndarray, speed: np.ndarray, *, cost: bool = False
 ) -> np.ndarray | float:
-    """Parameters by linear least squares on the model's equations, speeds and rates from a Savitzky-Golay filter
-    over about 0.2 s (never raw differences of quantised speeds); a parameter the data does not excite is 0. With
-    ``cost``, the squared residual instead."""
+    """Parameters by linear least squares on the model's equations integrated over every span of ``SPAN`` [s] (at
+    least two samples): the rates' terms integrate to the speeds' changes, so no derivative of noisy, quantised
+    speeds is taken (a smoothed derivative cannot follow a drive of a few milliseconds, and its start would be
+    stiff). The speeds' terms are integrated by the trapezoid rule, the inputs (held from each sample) exactly. A
+    parameter the data does not excite is 0. With ``cost``, the squared residual instead."""
     dt = float(np.median(np.diff(t)))
-    window = max(5, 2 * round(0.1 / dt) + 1)
-    smooth = savgol_filter(speed, window, 2, axis=0)
-    rate = savgol_filter(speed, window, 2, deriv=1, delta=dt, axis=0)
-    rows, target = model.regressors(smooth, rate, inputs)
+    m = min(len(t) - 1, max(2, round(SPAN / dt)))
+    change = np.concatenate([speed[m:] - speed[:-m], np.zeros((m, 2))])
+    still, target = model.regressors(speed, np.zeros_like(speed), inputs)
+    moved, _ = model.regressors(speed, change, inputs)  # the rows are linear in the rate: their rate part
+    steps = np.diff(t)[:, None]
+
+    def spans(x: np.ndarray, trapezoid: bool) -> np.ndarray:
+        """Integrals of each equation's samples ``x`` (2 n, ...) over [t_k, t_k+m]."""
+        per = x.reshape(2, len(t), -1)
+        areas = 0.5 * (per[:, 1:] + per[:, :-1]) * steps if trapezoid else per[:, :-1] * steps
+        total = np.concatenate([np.zeros((2, 1, per.shape[2])), np.cumsum(areas, axis=1)], axis=1)
+        return total[:, m:] - total[:, :-m]
+
+    rate_part = (moved - still).reshape(2, len(t), -1)[:, :-m]
+    rows = (rate_part + spans(still, trapezoid=True)).reshape(-1, still.shape[1])
+    target = spans(target[:, None], trapezoid=False).ravel()
     scale = np.linalg.norm(rows, axis=0)
     usable = scale > 1e-9 * max(scale.max(), 1e-300)
     solution = np.zeros(rows.shape[1])
@@ -318,6 +333,25 @@ def propagated(
     jacobian = np.array(columns).T
     variance = np.einsum("ki,ij,kj->k", jacobian, covariance, jacobian)
     return {k: float(np.sqrt(max(v, 0.0))) if np.isfinite(v) else np.inf for k, v in zip(keys, variance, strict=True)}
+
+
+#: two readings whose costs are closer than this (relative) fit the log equally well
+SAME_COST = 0.02
+
+
+def ambiguous_reading(fits: dict[bool, OutputError]) -> tuple[str, ...]:
+    """A note when the speeds fit as well read as instants as read as each interval's mean: a mean over an
+    interval h is, to second order, the instant h/2 before its end, so the reading trades against h/2 of delay."""
+    instants, means = fits[False], fits[True]
+    if not (np.isfinite(instants.cost) and np.isfinite(means.cost)):
+        return ()
+    if abs(instants.cost - means.cost) > SAME_COST * min(instants.cost, means.cost):
+        return ()
+    return (
+        f"the speeds fit as well read as instants (delay {instants.delay:.4f} s) as read as means over each sample "
+        f"interval (delay {means.delay:.4f} s): this log cannot tell them apart; if the speeds are odometry's (wheel "
+        "encoder increments over each interval) the second delay is the robot's",
+    )
 
 
 def unseparated(model: SpeedModel, params: np.ndarray, std: np.ndarray) -> tuple[str, ...]:

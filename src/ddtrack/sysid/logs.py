@@ -46,18 +46,30 @@ def read_speed_log(
 
     with open_bag(path) as reader:
         if model == "body":
-            sent, values = _joint_efforts(reader, joint_topic)
+            sent, values, sent_lag = _joint_efforts(reader, joint_topic)
             inputs = joint_topic
         else:
-            sent, values = _commands(reader, cmd_topic)
+            sent, values, sent_lag = _commands(reader, cmd_topic)
             inputs = cmd_topic
         if wheels is None:
-            measured_at, speeds = _odometry(reader, odom_topic)
+            measured_at, speeds, measured_lag = _odometry(reader, odom_topic)
             measured = odom_topic
         else:
-            measured_at, speeds = _wheel_joint_speeds(reader, joint_topic, *wheels)
+            measured_at, speeds, measured_lag = _wheel_joint_speeds(reader, joint_topic, *wheels)
             measured = f"{joint_topic} speeds"
-    return _held_inputs(path, sent, values, measured_at, speeds, (inputs, measured))
+    notes = ()
+    offset = measured_lag - sent_lag
+    if abs(offset) > CLOCK_TOLERANCE:  # the streams were stamped on two clocks: put the speeds on the inputs'
+        measured_at = measured_at + offset
+        notes = (
+            f"{measured}'s stamps run {offset / 1e9:.4g} s behind {inputs}'s clock (the least receive time minus "
+            f"stamp, in the bag); they were moved onto it, so the fitted delay holds the least transport latency",
+        )
+    return _held_inputs(path, sent, values, measured_at, speeds, (inputs, measured), notes)
+
+
+#: [ns] a gap between two streams' clocks beyond this is corrected (a network's least latency is below it)
+CLOCK_TOLERANCE = 5_000_000
 
 
 def _stamped(messages: list) -> np.ndarray:
@@ -66,7 +78,13 @@ def _stamped(messages: list) -> np.ndarray:
     return np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in messages], dtype=np.int64)
 
 
-def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+def _clock_lag(messages: list) -> int:
+    """[ns] how far a stream's stamps run behind the recorder's clock: the least receive time minus stamp over its
+    messages (the clock offset plus the least transport latency); 0 for a stream stamped on receipt."""
+    return int(np.min([bag_time for bag_time, _ in messages] - _stamped(messages)))
+
+
+def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
     """The stamps [ns] and (v*, omega*) of each velocity command, in stamp order (receive order can differ)."""
     from ..ros.reading import topic_messages
 
@@ -75,10 +93,10 @@ def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
     values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
     sent = _stamped(commands)
     order = np.argsort(sent, kind="stable")
-    return sent[order], values[order]
+    return sent[order], values[order], _clock_lag(commands)
 
 
-def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np.ndarray, np.ndarray]:
+def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np.ndarray, np.ndarray, int]:
     """The stamps [ns] and the right and left wheels' ``field`` (effort or velocity) of each JointState, in stamp
     order; the right wheel is the joint whose name says "right" (else the first)."""
     from ..ros.reading import topic_messages
@@ -92,26 +110,27 @@ def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np
     values = np.array([[getattr(msg, field)[right], getattr(msg, field)[left]] for _, msg in joints], dtype=float)
     sent = _stamped(joints)
     order = np.argsort(sent, kind="stable")
-    return sent[order], values[order]
+    return sent[order], values[order], _clock_lag(joints)
 
 
-def _joint_efforts(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+def _joint_efforts(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
     return _wheel_joints(reader, topic, "effort", "record the wheel torques")
 
 
-def _wheel_joint_speeds(reader: Any, topic: str, radius: float, half: float) -> tuple[np.ndarray, np.ndarray]:
+def _wheel_joint_speeds(reader: Any, topic: str, radius: float, half: float) -> tuple[np.ndarray, np.ndarray, int]:
     """The stamps [ns] and (v, omega) of the wheels' speeds (no slip): the axle midpoint's per second."""
-    stamps, rates = _wheel_joints(reader, topic, "velocity", "record the wheel speeds, or measure with --speeds odom")
-    return stamps, np.column_stack(body_increments(rates.T, radius, half))
+    missing = "record the wheel speeds, or measure with --speeds odom"
+    stamps, rates, lag = _wheel_joints(reader, topic, "velocity", missing)
+    return stamps, np.column_stack(body_increments(rates.T, radius, half)), lag
 
 
-def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray]:
+def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
     """The stamps [ns] and twist (v, omega) of each Odometry message."""
     from ..ros.reading import topic_messages
 
     odometry = topic_messages(reader, topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
     speeds = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for _, m in odometry], dtype=float)
-    return _stamped(odometry), speeds
+    return _stamped(odometry), speeds, _clock_lag(odometry)
 
 
 def _held_inputs(
@@ -121,10 +140,11 @@ def _held_inputs(
     measured_at: np.ndarray,
     speeds: np.ndarray,
     topics: tuple[str, str],
+    notes: tuple[str, ...] = (),
 ) -> SpeedLog:
-    """At each measurement's stamp, its (v, omega) and the input last sent at or before it (held until the next);
-    samples before the first input are dropped. ``topics``: (the inputs', the measurements'), which name each
-    sample's messages in errors."""
+    """The measurements at their stamps and the inputs at theirs (each held until the next), on one time base
+    from the first measurement after the first input (earlier ones are dropped). ``topics``: (the inputs', the
+    measurements'), which name each sample's messages in errors."""
     latest = np.searchsorted(sent, measured_at, side="right") - 1
     valid = latest >= 0
     if valid.sum() == 0:
@@ -136,7 +156,11 @@ def _held_inputs(
         for i in np.flatnonzero(valid)
     )
     source = f"'{path}' ({inputs}, {measured})"
-    return SpeedLog(t=t, command=values[latest[valid]], speed=speeds[valid], source=source, rows=rows)
+    sent_t = (sent - measured_at[valid][0]) / 1e9
+    return SpeedLog(
+        t=t, command=values[latest[valid]], speed=speeds[valid], source=source, rows=rows, sent_t=sent_t,
+        sent=values, notes=notes,
+    )  # fmt: skip
 
 
 def read_motor_log(path: Path) -> MotorLog:

@@ -45,6 +45,17 @@ def cut(t: np.ndarray, speed: np.ndarray, window: float) -> Windows:
     return Windows(samples[:, 1:], measured, (samples < n).astype(float))
 
 
+def unread_starts(windows: Windows) -> Windows:
+    """Windows for speeds read as interval means: a window's first sample is the mean over the interval before its
+    start, not its start's speeds, so it is not compared (the start is fitted from the window's later samples; a
+    window with none is dropped). Compared with it, the starts lag by half a sample, and a longer delay and the
+    instants' reading fit better than the truth."""
+    mask = windows.mask.copy()
+    mask[:, 0] = 0.0
+    keep = mask.sum(axis=1) > 0
+    return Windows(windows.ending[keep], windows.speed[keep], mask[keep])
+
+
 def windowed(scheduled: Schedule, windows: Windows) -> tuple[jax.Array, ...]:
     """The schedule's intervals arranged as the windows simulate them, (k, m - 1, ...); a padded interval has zero
     length, so the simulation holds its state there."""
@@ -164,17 +175,20 @@ def output_error(
     Gauss-Newton covariance s^2 (J^T J)^-1, s^2 = |r|^2 / (residuals - p - 2 k), the k windows' starts counted."""
     t, speed, sent_t, sent, slots = record
     windows = cut(t, speed, window)
+    if interval_mean:
+        windows = unread_starts(windows)
     measured, mask = jnp.asarray(windows.speed), jnp.asarray(windows.mask)
     count, n_model = len(windows.mask), start.size
     free = max_delay > 0
     n_params = n_model + int(free)
 
-    def scheduled(q: np.ndarray, nudge: float = 0.0) -> tuple[jax.Array, ...]:
-        return windowed(schedule(t, sent_t, sent, (q[n_model] if free else delay) + nudge, slots), windows)
-
     def args(q: np.ndarray, nudge: float = 0.0) -> tuple:
+        params = q[:n_params].copy()
+        if free:  # the schedule and the simulation both see the nudged delay (else a switch clips to a corner)
+            params[n_model] += nudge
+        scheduled = windowed(schedule(t, sent_t, sent, params[n_model] if free else delay, slots), windows)
         starts = jnp.asarray(q[n_params:].reshape(count, 2))
-        return jnp.asarray(q[:n_params]), delay, starts, scheduled(q, nudge), measured, mask
+        return jnp.asarray(params), delay, starts, scheduled, measured, mask
 
     def residual_fn(q: np.ndarray, w: jax.Array) -> np.ndarray:  # q = (params, delay, each window's start speeds)
         return np.asarray(_residuals(model.rate, interval_mean, substeps, free, *args(q), w)).ravel()
