@@ -89,7 +89,7 @@ def check_identify_and_tune(out: str) -> None:
         assert line in guide, f"docs/identification.md does not show this line of the worked example:\n{line}"
     assert "| tuned | backstepping |" in out and "| default | backstepping |" in out  # compared by bench --scenario
     (delay,) = number(rf"command delay {NUMBER} s", out)
-    assert delay == pytest.approx(0.05)  # the real robot's hidden latency, found
+    assert delay == pytest.approx(0.05, abs=1e-3)  # the real robot's hidden latency, found to its model's error
     better, low, _ = number(rf"tuned over default: {NUMBER} \[{NUMBER}, {NUMBER}\] % lower", out)
     assert low > 0 and better > 0
 
