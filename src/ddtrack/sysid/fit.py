@@ -119,7 +119,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
     record = Record(t[:n_fit], speed[:n_fit], sent_t, sent, slots_for(t, sent_t))
     delay = screened_delay(model, record, max_delay, log.source)
     longest = float(np.diff(t).max())
-    start = equation_error(model, record.t, held_at(record.t, sent_t, sent, delay), record.speed)
+    start = np.asarray(equation_error(model, record.t, held_at(record.t, sent_t, sent, delay), record.speed))
     fits = {}
     for mean in (False, True):  # both readings of the speeds: instantaneous or interval means
         needed = substeps_for(model, start, speed, longest)

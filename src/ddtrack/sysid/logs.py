@@ -57,7 +57,7 @@ def read_speed_log(
         else:
             measured_at, speeds, measured_lag = _wheel_joint_speeds(reader, joint_topic, *wheels)
             measured = f"{joint_topic} speeds"
-    notes = ()
+    notes: tuple[str, ...] = ()
     offset = measured_lag - sent_lag
     if abs(offset) > CLOCK_TOLERANCE:  # the streams were stamped on two clocks: put the speeds on the inputs'
         measured_at = measured_at + offset
