@@ -24,7 +24,7 @@ import numpy as np
 from ddtrack import enable_float64
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
 from ddtrack.sysid import LAG, excitation_plan, identify_lag, lag_log
-from ddtrack.sysid.fit import WINDOW
+from ddtrack.sysid.output_error import WINDOW
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 #: name -> (lag_log keywords, the delay [s] and reading to find); the odometry_rate ones log the speeds on their

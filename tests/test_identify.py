@@ -342,3 +342,16 @@ def test_ddtrack_identifies_its_own_torque_plant_from_a_bag_of_a_closed_loop_run
     assert code == 2 and "wheel-joint speeds, need the robot's geometry" in err
     code, _, err = cli("identify", tmp_path / "run.mcap", "--model", "body")
     assert code == 2 and "--preset, or --wheel-radius and --half-axle" in err
+
+
+def test_two_readings_that_fit_alike_are_named_with_each_ones_delay():
+    from ddtrack.sysid.fit import ambiguous_reading
+    from ddtrack.sysid.output_error import OutputError
+
+    def fit(cost, delay):
+        return OutputError(np.ones(2), np.ones(2), cost, np.ones(2), 1, 4, np.eye(2), delay, 1e-4)
+
+    (note,) = ambiguous_reading({False: fit(1.00, 0.0753), True: fit(1.01, 0.0501)})
+    assert "instants (delay 0.0753 s)" in note and "interval (delay 0.0501 s)" in note
+    assert ambiguous_reading({False: fit(1.00, 0.0753), True: fit(1.05, 0.0501)}) == ()  # told apart: no note
+    assert ambiguous_reading({False: fit(np.inf, 0.0), True: fit(1.0, 0.05)}) == ()  # one failed: nothing to compare

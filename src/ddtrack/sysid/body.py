@@ -22,7 +22,8 @@ from jax import Array
 from ..model.dynamics import body_acceleration
 from ..model.params import RobotParams
 from ..model.traction import wheel_speeds
-from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify, propagated
+from .fit import SpeedFit, SpeedLog, SpeedModel, identify, propagated
+from .output_error import WINDOW
 
 NAMES = ("M_v", "md", "M_w", "viscous_friction", "coulomb_friction")
 

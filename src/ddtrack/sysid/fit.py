@@ -27,7 +27,6 @@ from .schedule import held_at, schedule, simulate_jit, slots_for
 
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
 MAX_SUBSTEPS = 64
-START_SUBSTEPS = 16  #: the first fit's most RK4 steps per segment; the fitted model's own need is checked after
 #: the largest |rate Jacobian eigenvalue| x RK4 step allowed: Coulomb friction's tanh corner is stiff at rest (a
 #: small robot's 1/eps_f slope reaches 1600 1/s), and beyond RK4's stability (2.79) the tangents of jacfwd blow up
 STIFF_STEP = 0.5
@@ -36,8 +35,6 @@ MIN_SAMPLES = 80
 LEAD = 1.0
 #: [s] the equation error's equations are integrated over spans this long (at least two samples)
 SPAN = 0.05
-
-__all__ = ["SUBSTEPS", "WINDOW"]
 
 
 @dataclass(frozen=True)
@@ -121,16 +118,10 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
     longest = float(np.diff(t).max())
     start = np.asarray(equation_error(model, record.t, held_at(record.t, sent_t, sent, delay), record.speed))
     fits = {}
+    substeps = substeps_for(model, start, speed, longest)
     for mean in (False, True):  # both readings of the speeds: instantaneous or interval means
-        needed = substeps_for(model, start, speed, longest)
-        # a poor start (derivatives of a fast drive smoothed away) can look stiff: try fewer steps first
-        substeps = min(needed, START_SUBSTEPS)
         fit = output_error(model, record, start, delay, max_delay=max_delay, interval_mean=mean, window=window,
                            substeps=substeps)  # fmt: skip
-        if not np.isfinite(fit.cost) and needed > substeps:
-            substeps = needed
-            fit = output_error(model, record, start, delay, max_delay=max_delay, interval_mean=mean,
-                               window=window, substeps=substeps)  # fmt: skip
         stiffer = substeps_for(model, fit.params, speed, longest) if np.isfinite(fit.cost) else substeps
         if stiffer > substeps:  # the fit went where the start's steps are too long: again, from there
             fit = output_error(model, record, fit.params, fit.delay, max_delay=max_delay, interval_mean=mean,

@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model.lag import LagPlant
-from .fit import WINDOW, SpeedFit, SpeedLog, SpeedModel, identify, simulate
+from .fit import SpeedFit, SpeedLog, SpeedModel, identify, simulate
+from .output_error import WINDOW
 
 
 def _rate(theta, speed, command):

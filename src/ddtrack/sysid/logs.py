@@ -78,10 +78,10 @@ def _stamped(messages: list) -> np.ndarray:
     return np.array([header_or_bag_time(bag_time, msg) for bag_time, msg in messages], dtype=np.int64)
 
 
-def _clock_lag(messages: list) -> int:
-    """[ns] how far a stream's stamps run behind the recorder's clock: the least receive time minus stamp over its
-    messages (the clock offset plus the least transport latency); 0 for a stream stamped on receipt."""
-    return int(np.min([bag_time for bag_time, _ in messages] - _stamped(messages)))
+def _clock_lag(messages: list, stamps: np.ndarray) -> int:
+    """[ns] how far a stream's ``stamps`` (of its ``messages``) run behind the recorder's clock: the least receive
+    time minus stamp (the clock offset plus the least transport latency); 0 for a stream stamped on receipt."""
+    return int(np.min(np.array([bag_time for bag_time, _ in messages], dtype=np.int64) - stamps))
 
 
 def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
@@ -93,7 +93,7 @@ def _commands(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
     values = np.array([[tw.linear.x, tw.angular.z] for tw in twists], dtype=float)
     sent = _stamped(commands)
     order = np.argsort(sent, kind="stable")
-    return sent[order], values[order], _clock_lag(commands)
+    return sent[order], values[order], _clock_lag(commands, sent)
 
 
 def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np.ndarray, np.ndarray, int]:
@@ -110,7 +110,7 @@ def _wheel_joints(reader: Any, topic: str, field: str, missing: str) -> tuple[np
     values = np.array([[getattr(msg, field)[right], getattr(msg, field)[left]] for _, msg in joints], dtype=float)
     sent = _stamped(joints)
     order = np.argsort(sent, kind="stable")
-    return sent[order], values[order], _clock_lag(joints)
+    return sent[order], values[order], _clock_lag(joints, sent)
 
 
 def _joint_efforts(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
@@ -130,7 +130,8 @@ def _odometry(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, int]:
 
     odometry = topic_messages(reader, topic, ("nav_msgs/msg/Odometry",), option="--odom-topic")
     speeds = np.array([[m.twist.twist.linear.x, m.twist.twist.angular.z] for _, m in odometry], dtype=float)
-    return _stamped(odometry), speeds, _clock_lag(odometry)
+    stamps = _stamped(odometry)
+    return stamps, speeds, _clock_lag(odometry, stamps)
 
 
 def _held_inputs(

@@ -182,11 +182,14 @@ def output_error(
     free = max_delay > 0
     n_params = n_model + int(free)
 
+    held = None if free else windowed(schedule(t, sent_t, sent, delay, slots), windows)  # a fixed delay's, once
+
     def args(q: np.ndarray, nudge: float = 0.0) -> tuple:
         params = q[:n_params].copy()
+        scheduled = held
         if free:  # the schedule and the simulation both see the nudged delay (else a switch clips to a corner)
             params[n_model] += nudge
-        scheduled = windowed(schedule(t, sent_t, sent, params[n_model] if free else delay, slots), windows)
+            scheduled = windowed(schedule(t, sent_t, sent, params[n_model], slots), windows)
         starts = jnp.asarray(q[n_params:].reshape(count, 2))
         return jnp.asarray(params), delay, starts, scheduled, measured, mask
 

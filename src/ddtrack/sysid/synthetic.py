@@ -19,6 +19,7 @@ from jax import Array
 from ..model import dynamics
 from ..model.motors import DCMotor, voltage_driver
 from ..model.params import RobotParams
+from ..model.sensing import body_increments
 from ..model.traction import wheel_speeds
 from .excitation import Plan
 from .fit import SpeedLog, SpeedModel, simulate
@@ -35,6 +36,16 @@ def _applied_finely(t: np.ndarray, inputs: np.ndarray, delay: float) -> tuple[np
     fine_t = np.arange(len(t) * FINE + 1) * (step / FINE)
     acting = np.searchsorted(t, fine_t - delay + 1e-12, side="right") - 1
     return fine_t, np.where((acting >= 0)[:, None], inputs[np.clip(acting, 0, None)], 0.0)
+
+
+def _encoder_speeds(
+    angles: np.ndarray, steps: np.ndarray, encoder_counts: int, wheel_radius: float, half_axle: float
+) -> np.ndarray:
+    """(v, omega) as odometry gives them: the wheels' ``angles`` (n + 1, 2) [rad] (right, left), quantised to
+    ``encoder_counts`` per turn, differenced over the ``steps`` (n,) [s] between them: each a mean over its interval."""
+    tick = 2 * np.pi / encoder_counts
+    rates = np.diff(np.floor(angles / tick) * tick, axis=0) / steps[:, None]
+    return np.column_stack(body_increments(rates.T, wheel_radius, half_axle))
 
 
 def lag_log(
@@ -72,12 +83,9 @@ def lag_log(
     angles = np.concatenate(
         [np.zeros((1, 2)), np.cumsum(0.5 * (wheel_rates[1:] + wheel_rates[:-1]) * (step / FINE), axis=0)]
     )
-    tick = 2 * np.pi / encoder_counts
-    counted = np.floor(angles[::FINE][: len(plan.t) + 1] / tick) * tick
-    rates = np.diff(counted, axis=0) / step  # each wheel's mean rate over the interval ending at the sample
-    v = wheel_radius * (rates[:, 0] + rates[:, 1]) / 2
-    omega = wheel_radius * (rates[:, 0] - rates[:, 1]) / (2 * half_axle)
-    measured = np.column_stack([v, omega]) + rng.normal(size=(len(plan.t), 2)) * np.asarray(noise)
+    counted = angles[::FINE][: len(plan.t) + 1]
+    speeds = _encoder_speeds(counted, np.full(len(plan.t), step), encoder_counts, wheel_radius, half_axle)
+    measured = speeds + rng.normal(size=(len(plan.t), 2)) * np.asarray(noise)
     t = plan.t + step  # a rate is known at the end of its interval, when the next command has just been sent
     in_force = sent[np.minimum(np.arange(len(plan.t)) + 1, len(plan.t) - 1)]
     return SpeedLog(t=t, command=in_force, speed=measured, source="synthetic lag log with encoders")
@@ -131,12 +139,9 @@ def timed_lag_log(
         measured = at[:, :2] + rng.normal(size=(stamps.size, 2)) * np.asarray(noise)
         t, source = stamps, f"synthetic lag log, odometry at {odometry_rate:g} Hz"
     else:
-        tick = 2 * np.pi / encoder_counts
         angles = np.column_stack([at[:, 2] + half_axle * at[:, 3], at[:, 2] - half_axle * at[:, 3]]) / wheel_radius
-        rates = np.diff(np.floor(angles / tick) * tick, axis=0) / np.diff(stamps)[:, None]
-        v = wheel_radius * (rates[:, 0] + rates[:, 1]) / 2
-        omega = wheel_radius * (rates[:, 0] - rates[:, 1]) / (2 * half_axle)
-        measured = np.column_stack([v, omega]) + rng.normal(size=(v.size, 2)) * np.asarray(noise)
+        speeds = _encoder_speeds(angles, np.diff(stamps), encoder_counts, wheel_radius, half_axle)
+        measured = speeds + rng.normal(size=(stamps.size - 1, 2)) * np.asarray(noise)
         t, source = stamps[1:], f"synthetic lag log with encoders, odometry at {odometry_rate:g} Hz"
     command = sent[np.clip(np.searchsorted(sent_t, t, side="right") - 1, 0, None)]
     return SpeedLog(t=t, command=command, speed=measured, source=source, sent_t=sent_t, sent=sent)
