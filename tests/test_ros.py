@@ -7,6 +7,7 @@ import csv
 from collections import Counter
 from decimal import Decimal
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -15,12 +16,14 @@ from conftest import SCENARIOS
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import QosDurability
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from ddtrack.ros.messages import NANOSECONDS, header, message, planar_pose, twist, typestore
 
 START = 1_700_000_000.25  # the stamp of t = 0 [s since the epoch]; a quarter second checks the nanoseconds field
-PERIODIC = ("/tf", "/odom", "/odom_estimate", "/reference", "/cmd_vel", "/joint_states")
+PERIODIC = ("/clock", "/tf", "/odom", "/odom_estimate", "/reference", "/cmd_vel", "/joint_states")
+ONCE = ("/robot_description", "/tf_static", "/reference_path", "/path")  # transient local
 
 
 @pytest.fixture(scope="module")
@@ -79,14 +82,14 @@ def test_mcap_own_reader_sees_every_topic_once_per_period_with_frames_and_stamps
             by_topic.setdefault(channel.topic, []).append((raw.log_time, decoded))
     assert {topic: len(items) for topic, items in by_topic.items()} == {
         **dict.fromkeys(PERIODIC, n),
-        "/reference_path": 1,
-        "/path": 1,
+        **dict.fromkeys(ONCE, 1),
     }
     stamps = expected_stamps(columns)
-    for topic in ("/odom", "/odom_estimate", "/reference", "/joint_states"):
+    for topic in ("/odom", "/odom_estimate", "/reference", "/joint_states", "/clock"):
         items = by_topic[topic]
         assert [log_time for log_time, _ in items] == stamps.tolist(), topic
-        assert [m.header.stamp.sec * NANOSECONDS + m.header.stamp.nanosec for _, m in items] == stamps.tolist(), topic
+        stamped = [m.clock if topic == "/clock" else m.header.stamp for _, m in items]
+        assert [s.sec * NANOSECONDS + s.nanosec for s in stamped] == stamps.tolist(), topic
     odom = by_topic["/odom"][-1][1]
     assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
     assert odom.pose.pose.position.x == columns["x"][-1] and odom.pose.pose.position.y == columns["y"][-1]
@@ -106,7 +109,7 @@ def test_mcap_own_reader_sees_every_topic_once_per_period_with_frames_and_stamps
     assert (command.linear.x, command.angular.z) == (columns["v_cmd"][3], columns["omega_cmd"][3])
     with bag.open("rb") as file:
         summary = make_reader(file).get_summary()
-    assert summary is not None and summary.statistics.message_count == 6 * n + 2
+    assert summary is not None and summary.statistics.message_count == len(PERIODIC) * n + len(ONCE)
     assert {s.name for s in summary.schemas.values()} >= {"nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"}
 
 
@@ -122,6 +125,60 @@ def test_rosbags_reads_the_same_bag_and_its_rosbag2_metadata(bag, columns):
     driven = paths[0].poses
     assert len(driven) == len(columns["t"])
     assert [p.pose.position.x for p in driven] == columns["x"].tolist()
+
+
+def test_a_viewer_gets_the_robot_its_frames_and_the_one_shot_topics_latched(run_folder, columns, tmp_path, cli):
+    folder = tmp_path / "viewer"
+    code, _, err = cli(
+        "export", run_folder, "--to", folder, "--odom-frame", "world", "--base-frame", "base_footprint", "--start", "1"
+    )
+    assert code == 0, err
+    with AnyReader([folder], default_typestore=typestore()) as reader:
+        durability = {c.topic: [q.durability for q in c.ext.offered_qos_profiles] for c in reader.connections}
+        by_topic: dict[str, list] = {}
+        for c, _, raw in reader.messages():
+            by_topic.setdefault(c.topic, []).append(reader.deserialize(raw, c.msgtype))
+    assert all(durability[topic] == [QosDurability.TRANSIENT_LOCAL] for topic in ONCE)
+    assert all(durability[topic] == [] for topic in PERIODIC)  # the recorder's defaults: volatile
+    robot = ElementTree.fromstring(by_topic["/robot_description"][0].data)
+    links = {link.get("name") for link in robot.iter("link")}
+    joints = {joint.get("name"): joint for joint in robot.iter("joint")}
+    assert robot.get("name") == "turtlebot3_burger" and "base_footprint" in links
+    wheel = joints["wheel_left_joint"]
+    assert wheel.get("type") == "continuous" and wheel.find("parent").get("link") == "base_footprint"
+    assert [float(x) for x in wheel.find("origin").get("xyz").split()] == [0.0, 0.08, 0.033]  # L and R of the Burger
+    static = by_topic["/tf_static"][0].transforms
+    assert {t.child_frame_id for t in static} == {"chassis_link", "caster_link"} <= links
+    assert all(t.header.frame_id == "base_footprint" for t in static)
+    k = 9
+    moving = {t.child_frame_id: t for t in by_topic["/tf"][k].transforms}
+    assert set(moving) == {"base_footprint", "base_footprint_estimate", "wheel_right_link", "wheel_left_link"}
+    assert moving["base_footprint_estimate"].header.frame_id == "world"
+    assert moving["base_footprint_estimate"].transform.translation.x == columns["odom_x"][k]
+    spin = moving["wheel_right_link"].transform.rotation  # a turn of phi_r about the axle (body y)
+    assert (spin.y, spin.w) == pytest.approx((np.sin(columns["phi_r"][k] / 2), np.cos(columns["phi_r"][k] / 2)))
+    estimate, truth = by_topic["/odom_estimate"][k], by_topic["/odom"][k]
+    assert (estimate.header.frame_id, estimate.child_frame_id) == ("world", "base_footprint_estimate")
+    assert (truth.header.frame_id, truth.child_frame_id) == ("world", "base_footprint")
+    assert not truth.pose.covariance.any() and not truth.twist.covariance.any()  # the true state is exact
+
+
+def test_the_estimates_covariances_are_the_encoders_quantisation_carried_along_the_run(bag, columns):
+    with AnyReader([bag], default_typestore=typestore()) as reader:
+        topic = [c for c in reader.connections if c.topic == "/odom_estimate"]
+        estimates = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=topic)]
+    pose = np.array([m.pose.covariance for m in estimates]).reshape(-1, 6, 6)
+    twist_ = np.array([m.twist.covariance for m in estimates]).reshape(-1, 6, 6)
+    count = 2 * np.pi / 4096  # the Burger's XL430 count [rad]
+    radius = 0.03333  # the odometry's nominal R-hat (the scenario's worn tyre), the one its estimate uses
+    speed = radius * count / np.sqrt(12) / 0.05  # std of R-hat (e0 - e1 + e0' - e1') / 2 / T_c
+    assert np.sqrt(twist_[:, 0, 0]) == pytest.approx(np.full(len(columns["t"]), speed), rel=1e-12)
+    assert np.sqrt(twist_[:, 5, 5]) == pytest.approx(np.full(len(columns["t"]), speed / 0.08), rel=1e-12)
+    # the heading's error is the first and last readings' (the increments telescope): R / (2 L) 2 q / sqrt(12)
+    heading = radius / 0.16 * 2 * count / np.sqrt(12)
+    assert np.sqrt(pose[1:, 5, 5]) == pytest.approx(np.full(len(columns["t"]) - 1, heading), rel=1e-9)
+    assert not pose[0].any() and np.all(np.diff(pose[1:, 0, 0] + pose[1:, 1, 1]) >= -1e-20)  # position drifts
+    assert np.allclose(pose, np.swapaxes(pose, 1, 2)) and np.all(np.linalg.eigvalsh(pose[-1]) >= -1e-20)
 
 
 def test_a_rosbag2_folder_holds_metadata_and_its_mcap(run_folder, tmp_path, cli):
@@ -269,6 +326,8 @@ def test_bad_bags_and_options_are_refused_with_one_line_and_nothing_written(bag,
         (("import", bag, "--odom-topic", "/odom", "--out", tmp_path / "x.txt"), "is not a .csv file"),
         (("export", run_folder, "--to", tmp_path / "x.bag"), "give FILE.mcap, FILE.csv or a folder name"),
         (("export", tmp_path, "--to", tmp_path / "y.mcap"), "is not a run folder"),
+        (("export", run_folder, "--to", tmp_path / "y.mcap", "--base-frame", "/base"), "is not a tf2 frame name"),
+        (("export", run_folder, "--to", tmp_path / "y.mcap", "--odom-frame", "base_link"), "give two names"),
     ]
     truncated = tmp_path / "truncated.mcap"
     truncated.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])

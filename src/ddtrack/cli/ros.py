@@ -40,14 +40,33 @@ def _seconds(text: str) -> Decimal:
     "[default: when the run folder was written].",
 )
 @click.option("--twist-stamped", is_flag=True, help="Publish /cmd_vel as TwistStamped instead of Twist.")
+@click.option("--odom-frame", default="odom", show_default=True, metavar="NAME", help="The world frame.")
+@click.option(
+    "--base-frame",
+    default="base_link",
+    show_default=True,
+    metavar="NAME",
+    help="The robot's body frame (a TurtleBot3's is base_footprint); the estimate's is NAME_estimate.",
+)
 @overwrite_option
-def export(folder: Path, to: Path, start: str | None, twist_stamped: bool, overwrite: bool) -> int:
-    """Write the run folder RUN_DIR (from `ddtrack run`) as a ROS 2 bag, with /tf, /odom, /reference, /cmd_vel,
-    /joint_states, /reference_path and /path, or as a CSV of its time series."""
+def export(
+    folder: Path, to: Path, start: str | None, twist_stamped: bool, odom_frame: str, base_frame: str, overwrite: bool
+) -> int:
+    """Write the run folder RUN_DIR (from `ddtrack run`) as a ROS 2 bag, with /clock, /tf, /tf_static,
+    /robot_description, /odom, /reference, /cmd_vel, /joint_states, /reference_path and /path, or as a CSV of its
+    time series."""
     from ..ros import export_run
 
     origin = None if start is None else _seconds(start)
-    done = export_run(folder, to, start=origin, twist_stamped=twist_stamped, overwrite=overwrite)
+    done = export_run(
+        folder,
+        to,
+        start=origin,
+        twist_stamped=twist_stamped,
+        odom_frame=odom_frame,
+        base_frame=base_frame,
+        overwrite=overwrite,
+    )
     if done.counts:
         topics = ", ".join(f"{topic} {count}" for topic, count in done.counts.items())
         click.echo(f"wrote {to}: {done.rows} control periods; messages: {topics}")
