@@ -17,7 +17,9 @@ from ddtrack.controllers import Backstepping, Cascade, ComputedTorque
 from ddtrack.metrics import (
     effort,
     improvement,
+    lost_path_time,
     pooled_improvement,
+    rate_ci,
     saturation_fraction,
     settling_time,
     summarize,
@@ -283,3 +285,43 @@ def test_the_leaderboards_saturation_interval_is_a_percentage_inside_0_100():
     text = interval_text(summary, 100.0)
     low, high = (float(v) for v in text.split("[")[1].rstrip("]").split(","))
     assert text.startswith("5.00 [") and 0.0 <= low < 5.0 < high <= 100.0
+
+
+def test_a_run_has_lost_the_path_only_when_it_stays_beyond_the_bound_for_the_last_fifth():
+    t = np.arange(0.0, 10.001, 0.1)  # window [0, 10]: the hold is 2 s
+    window = (0.0, 10.0)
+    gone = np.where(t >= 6.0, 2.0, 0.1)  # off from 6 s to the end
+    assert lost_path_time(t, gone, window, 1.0) == pytest.approx(6.0)
+    late = np.where(t >= 8.5, 2.0, 0.1)  # off for the last 1.5 s only: a swing, not yet lost
+    assert lost_path_time(t, late, window, 1.0) is None
+    back = np.where((t >= 2.0) & (t < 9.0), 2.0, 0.1)  # far off for 7 s, then back by the end
+    assert lost_path_time(t, back, window, 1.0) is None
+    start = np.full_like(t, 5.0)  # off the whole window
+    assert lost_path_time(t, start, window, 1.0) == 0.0
+    assert lost_path_time(t, gone, (6.5, 10.0), 1.0) == pytest.approx(6.5)  # only the window counts
+    assert lost_path_time(t, gone, window, 2.0) is None  # at the bound is not beyond it
+
+
+def test_a_lost_run_says_so_in_its_metrics_and_warns():
+    columns = {"t": np.arange(0.0, 10.001, 0.1), "tau_r": np.zeros(101), "tau_l": np.zeros(101)}
+    columns["e_tr"] = np.where(columns["t"] >= 6.0, 2.0, 0.1)
+    common = {"status": "ok", "window": (0.0, 10.0), "control_period": 0.1, "settling_threshold": 0.5}
+    lost = summarize(columns, **common, lost_path_error=1.0)
+    assert (lost["lost_path"], lost["lost_path_time"], lost["lost_path_error"]) == (True, pytest.approx(6.0), 1.0)
+    assert "lost_path" not in summarize(columns, **common)  # not judged without a bound
+    from ddtrack.runner import lost_path_warnings
+
+    (warning,) = lost_path_warnings(lost)
+    assert warning["code"] == "lost_path" and "from t = 6 s" in warning["message"]
+    assert lost_path_warnings(summarize(columns, **common, lost_path_error=3.0)) == []
+
+
+@pytest.mark.parametrize(("count", "total"), [(0, 10), (3, 10), (10, 10), (1, 36), (17, 30)])
+def test_a_rate_carries_the_wilson_interval(count, total):
+    from scipy import stats
+
+    expected = stats.binomtest(count, total).proportion_ci(confidence_level=0.95, method="wilson")
+    rate = rate_ci(count, total)
+    assert rate["mean"] == count / total and rate["n"] == total
+    assert (rate["ci_low"], rate["ci_high"]) == pytest.approx((expected.low, expected.high), abs=1e-12)
+    assert rate_ci(0, 0)["mean"] is None

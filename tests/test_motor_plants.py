@@ -308,3 +308,47 @@ def test_a_scenario_names_the_motor_plants_and_gets_its_presets_motor():
     no_motor = ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[*SHORT, "plant.model=motor_torque"])
     with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: 'motor_torque' needs the robot's motor.*burger"):
         prepare(no_motor)
+
+
+def test_a_pwm_board_drives_through_its_model_of_the_motor():
+    """PWM (model.md §1.7): the board's voltage R_a' tau* / (eta k_t) + k_e phi_dot from its model; on a true motor of
+    another resistance the torque is tau* R_a' / R_a, and with the true model it is current control's torque."""
+    from ddtrack.model.motors import drive_torque, torque_driver
+
+    true = motor_from_datasheet(preset("turtlebot3_burger").motor)
+    speeds = jnp.array([0.0, 3.0, -2.0])
+    command = jnp.array([0.3, 0.2, -0.1])  # inside the torque-speed curve at those speeds
+    same, _ = drive_torque(true, command, speeds, true)
+    assert np.asarray(same) == pytest.approx(np.asarray(torque_driver(true, command, speeds)[0]), rel=1e-12)
+    hotter = dataclasses.replace(true, resistance=1.2 * true.resistance)  # a warm winding the board does not know
+    applied, _ = drive_torque(hotter, command, speeds, true)
+    assert np.asarray(applied) == pytest.approx(np.asarray(command) / 1.2, rel=1e-12)
+    assert np.asarray(drive_torque(hotter, command, speeds)[0]) == pytest.approx(np.asarray(command), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("robot", "overrides", "drive", "says"),
+    [
+        ("turtlebot3_burger", [], "pwm", "drives them by PWM"),
+        ("turtlebot3_burger", ['plant.motor.drive="current"'], "current", "as if they controlled current"),
+        ("turtlebot3_waffle_pi", [], "current", None),  # the XM430 has a current mode
+    ],
+)
+def test_a_torque_law_on_a_servo_without_a_current_mode_drives_it_by_pwm_and_says_so(robot, overrides, drive, says):
+    from ddtrack import feasibility
+
+    scenario = ddtrack.load_scenario(
+        SCENARIOS / "burger_sized_20hz.toml",
+        overrides=[*SHORT, f'robot.preset="{robot}"', "plant.model=motor_torque", *overrides],
+        controller="backstepping",
+    )
+    plant = prepare(scenario)[0].plant
+    assert isinstance(plant, TorqueDrivenPlant) and (plant.pwm_model is not None) == (drive == "pwm")
+    warnings = [w for w in feasibility.check(scenario) if w["code"] == "drive_not_offered"]
+    assert [says in w["message"] for w in warnings] == ([] if says is None else [True])
+    velocity = ddtrack.load_scenario(
+        SCENARIOS / "burger_sized_20hz.toml",
+        overrides=[*SHORT, f'robot.preset="{robot}"', "plant.model=motor_velocity"],
+        controller="kinematic_backstepping",
+    )
+    assert all(w["code"] != "drive_not_offered" for w in feasibility.check(velocity))  # cmd_vel: as the robot runs

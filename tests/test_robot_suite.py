@@ -141,6 +141,51 @@ def test_the_boards_rank_by_the_nominal_condition_and_pair_by_cell():
     assert paired(runs, "r", "backstepping", "ltv_lqr") is None  # never ran: no answer, not zero
 
 
+def test_runs_that_lose_the_path_are_counted_apart_and_never_decide_the_pooled_verdict():
+    from ddtrack.robot_board import board_markdown, rows
+
+    def records(lost_error):
+        """Two laws on 2 conditions x 4 seeds; at 150 ms the candidate loses the path in seeds 0-2 and the
+        baseline in seed 0, with errors ``lost_error`` (what a last-bit difference makes of a lost run)."""
+        out = {}
+        for name, error in (("backstepping", 0.002), ("nn_adaptive_backstepping", 0.0016)):
+            for condition in ("nominal", "latency_150ms"):
+                for seed in range(4):
+                    lost = condition == "latency_150ms" and (seed == 0 or (name != "backstepping" and seed < 3))
+                    labels = {"study": "robots", "robot": "r", "trajectory": "figure_eight", "condition": condition}
+                    value = lost_error * (1 + seed) if lost else error * (1 + 0.1 * seed)
+                    out[f"{name}{condition}{seed}"] = {
+                        "configuration": {"controller": name, "labels": labels},
+                        "seed": seed,
+                        "status": "ok",
+                        "metrics": {"e_tr_mean": value, "lost_path": lost, "warnings": []},
+                    }
+        return out
+
+    verdicts = []
+    for lost_error in (1.4, 1.8, 40.0):
+        runs = rows(records(lost_error))
+        verdicts.append(paired(runs, "r", "backstepping", "nn_adaptive_backstepping"))
+        board = {
+            e["controller"]: e
+            for e in robot_board(runs, "r", ["backstepping", "nn_adaptive_backstepping"], ["nominal", "latency_150ms"])
+        }
+        assert (board["nn_adaptive_backstepping"]["lost"], board["backstepping"]["lost"]) == (3, 1)
+        assert board["nn_adaptive_backstepping"]["lost_rate"]["mean"] == 3 / 8
+        assert board["nn_adaptive_backstepping"]["latency_150ms"]["n"] == 1  # the one seed that tracked
+    assert verdicts[0] == verdicts[1] == verdicts[2]  # whatever the lost runs' errors: the same verdict
+    assert (verdicts[0]["n"], verdicts[0]["missing"]) == (5, 3)  # 4 nominal pairs and seed 3 at 150 ms
+    assert verdicts[0]["mean"] == pytest.approx(20.0)
+    summary = {
+        "boards": {"r": list(board.values())},
+        "ranking_agreement": {},
+        "left_out": [],
+        "nn_adaptive": {"r": {"nn_adaptive_backstepping vs backstepping": verdicts[0]}},
+    }
+    text = board_markdown(summary, ["nominal", "latency_150ms"])
+    assert "| 5 of 8 |" in text and "| 3: 37.5 [" in text
+
+
 def test_ranking_agreement_is_kendalls_tau_over_shared_controllers():
     def board(errors):
         return [{"controller": c, "nominal": {"mean": e}} for c, e in errors.items()]

@@ -203,6 +203,42 @@ def test_a_turtlebot_runs_on_the_slip_plant_from_the_command_line(tmp_path, cli)
     assert {"tau_r", "slip_r", "slip_lateral", "force_y", "w", "phidot_r"} <= set(columns)
 
 
+@pytest.mark.slow
+def test_on_a_slip_plant_the_grip_reported_is_what_its_own_contact_forces_used(tmp_path, cli):
+    """At mu = 0.01 the wheels slide: the run reports the friction its contact forces used (never above mu) and
+    the time it slid, not the no-slip formula's need and its "the wheels would slip"."""
+    out = tmp_path / "run"
+    sets = (arg for key in [*BURGER, "plant.floor_friction=0.01"] for arg in ("--set", key))
+    code, _, stderr = cli(
+        "run", SCENARIOS / "burger_sized_20hz.toml", "--controller", "backstepping", *sets, "--out", out
+    )
+    assert code == 0, stderr
+    import json
+
+    import pyarrow.parquet as pq
+
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert "mu_required_max" not in metrics and "friction_exceeds_floor" not in stderr
+    assert 0.0099 < metrics["mu_used_max"] <= 0.01 and metrics["time_sliding"] > 0.5  # slid most of the 1 s
+    table = pq.read_table(out / "timeseries.parquet")
+    c = {name: table.column(name).to_numpy() for name in table.column_names}
+    assert np.all(c["mu_used"] <= 0.01) and np.mean(c["sliding"]) * 1.0 == pytest.approx(metrics["time_sliding"])
+    # the plant's own force on the wheel that slides harder, F_ix = -mu N s_ix / sqrt(|s_i|^2 + eps^2), against the
+    # reported use: mu_used N |s_ix| / |s_i| = |F_ix|, with N = m g (1 - d / l_c) / 2 from the robot's numbers
+    slides = np.hypot([c["slip_r"], c["slip_l"]], c["slip_lateral"])
+    harder = np.argmax(slides, axis=0)
+    along = np.choose(harder, [c["slip_r"], c["slip_l"]])
+    force = np.choose(harder, [c["force_rx"], c["force_lx"]])
+    scenario = ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml", overrides=BURGER, controller="backstepping")
+    params = scenario.plant_params()
+    from ddtrack.model.slip import load_fraction
+
+    normal = params.mass * GRAVITY * float(load_fraction(params, preset("turtlebot3_burger").caster_position)) / 2
+    checked = np.abs(along) > 1e-6
+    implied = c["mu_used"][checked] * normal * np.abs(along[checked]) / slides.max(axis=0)[checked]
+    assert checked.sum() > 15 and np.abs(force[checked]) == pytest.approx(implied, rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("scenario", "overrides", "field"),
     [

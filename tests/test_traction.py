@@ -87,7 +87,8 @@ def test_the_paper_line_needs_more_grip_than_any_floor(tmp_path, cli):
     # 10 N m on 0.05 m wheels of a 10 kg robot: 200 N against 49 N of normal load per wheel, less friction
     assert 3.0 < metrics["mu_required_max"] < 4.2
     assert metrics["time_above_floor_mu"] > 0.0 and metrics["wheel_speed_max"] > 0.0
-    assert [w["code"] for w in metrics["warnings"]] == ["friction_beyond_any_floor"]
+    # in 5 s the robot, 7 m off the line at the start, has not reached it: off its path to the end of the window
+    assert [w["code"] for w in metrics["warnings"]] == ["lost_path", "friction_beyond_any_floor"]
     assert "not physically possible" in stderr
 
 

@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.csv
 import pyarrow.parquet as pq
 
-from .metrics import METRIC_DOMAINS, mean_ci
+from .metrics import METRIC_DOMAINS, mean_ci, rate_ci
 from .outdir import atomic_write
 
 #: the per-run statistics a leaderboard gives a mean and a 95 % interval of
@@ -35,13 +35,31 @@ def warning_codes(metrics: Mapping[str, Any] | None) -> set[str]:
     return {w["code"] for w in (metrics or {}).get("warnings") or []}
 
 
+def tracks(run: Mapping[str, Any]) -> bool:
+    """Whether a run (a flat row with ``status`` and its metrics) tracked its reference to the end: it neither
+    failed nor lost the path (``lost_path``, :func:`ddtrack.metrics.lost_path_time`)."""
+    return run["status"] == "ok" and not run.get("lost_path")
+
+
+def tracking_value(run: Mapping[str, Any], key: str = "e_tr_mean") -> Any:
+    """A run's ``key`` where it tracked, else None: a run that lost the path or failed is counted apart, never
+    averaged with the rest (its error grows without bound, and the last bit decides it)."""
+    return run.get(key) if tracks(run) else None
+
+
 def run_statistics(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """``runs``, ``failures`` (status not ok) and the mean [95 % CI] of each of :data:`STATISTICS` over ``runs``
-    (flat rows with ``status`` and the metrics), in its domain; a failed run counts as missing."""
-    summary: dict[str, Any] = {"runs": len(runs), "failures": sum(r["status"] != "ok" for r in runs)}
+    """``runs``, ``failures`` (status not ok), ``lost`` (ran to the end off the path) with ``lost_rate`` (a
+    fraction with its Wilson 95 % interval), and the mean [95 % CI] of each of :data:`STATISTICS` over the runs
+    that tracked (flat rows with ``status`` and the metrics), in its domain; the others count as missing."""
+    lost = sum(r["status"] == "ok" and bool(r.get("lost_path")) for r in runs)
+    summary: dict[str, Any] = {
+        "runs": len(runs),
+        "failures": sum(r["status"] != "ok" for r in runs),
+        "lost": lost,
+        "lost_rate": rate_ci(lost, len(runs)),
+    }
     for key in STATISTICS:
-        values = [r.get(key) if r["status"] == "ok" else None for r in runs]
-        summary[key] = mean_ci(values, domain=METRIC_DOMAINS[key])
+        summary[key] = mean_ci([tracking_value(r, key) for r in runs], domain=METRIC_DOMAINS[key])
     return summary
 
 

@@ -14,6 +14,7 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 
 from ._format import significant, with_interval
+from .board import tracking_value
 from .errors import ConfigError
 from .metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
 from .outdir import atomic_write
@@ -62,23 +63,22 @@ def run_specs(
 
 
 def summarise(rows: dict[str, list[dict]]) -> dict:
-    """Mean and 95 % CI of every statistic per controller, and the paired improvement of each controller's
-    mean tracking error over the first controller's (seeds where both runs succeeded)."""
+    """Mean and 95 % CI of every statistic per controller over its runs that tracked to the end, its failures and
+    the runs that lost the path (counted apart: their errors grow without bound), and the paired improvement of
+    each controller's mean tracking error over the first controller's (seeds where both runs tracked)."""
     names = list(rows)
     baseline = rows[names[0]]
     summary: dict = {"controllers": {}, "improvement_over": names[0], "improvement": {}}
     for name, runs in rows.items():
         summary["controllers"][name] = {
-            key: mean_ci([r[key] for r in runs], domain=METRIC_DOMAINS[key]) for key in STATISTICS
+            key: mean_ci([tracking_value(r, key) for r in runs], domain=METRIC_DOMAINS[key]) for key in STATISTICS
         }
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
+        summary["controllers"][name]["lost"] = sum(r["status"] == "ok" and bool(r.get("lost_path")) for r in runs)
         summary["controllers"][name]["warnings"] = warning_counts(runs)
         if name != names[0]:
-            paired = [
-                improvement(b["e_tr_mean"], r["e_tr_mean"])
-                for b, r in zip(baseline, runs, strict=True)
-                if b["e_tr_mean"] is not None and r["e_tr_mean"] is not None and b["e_tr_mean"] > 0
-            ]
+            pairs = [(tracking_value(b), tracking_value(r)) for b, r in zip(baseline, runs, strict=True)]
+            paired = [improvement(b, r) for b, r in pairs if b is not None and r is not None and b > 0]
             summary["improvement"][name] = mean_ci(paired, domain=METRIC_DOMAINS["improvement"]) | {
                 "paired_runs": len(paired)
             }
@@ -128,7 +128,7 @@ def format_summary(summary: dict, n: int) -> str:
     for name, stats in summary["controllers"].items():
         e = stats["e_tr_mean"]
         if e["mean"] is None:
-            text = "all runs failed"
+            text = "no run tracked to the end"
         elif e["ci_low"] is None:
             text = f"{significant(e['mean'])} m (one run: no interval)"
         else:
@@ -137,8 +137,10 @@ def format_summary(summary: dict, n: int) -> str:
         mean, low, high = (
             None if saturated[k] is None else 100.0 * saturated[k] for k in ("mean", "ci_low", "ci_high")
         )
+        lost = f", lost the path {stats['lost']}" if stats.get("lost") else ""
         lines.append(
-            f"  {name:<26} e_tr_mean {text}; saturated {with_interval(mean, low, high)} %; failures {stats['failures']}"
+            f"  {name:<26} e_tr_mean {text}; saturated {with_interval(mean, low, high)} %; "
+            f"failures {stats['failures']}{lost}"
         )
         if stats["warnings"]:
             lines.append(

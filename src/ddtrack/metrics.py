@@ -8,6 +8,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 WINDOW_TOLERANCE = 1e-9  # [s] sample times are k * T_c in floating point
+#: the final fraction of the metric window a run must spend beyond its bound, without coming back, to have lost the
+#: path: long enough that a transient (a corner, a latency-driven swing) is not counted
+LOST_PATH_HOLD = 0.2
 
 
 def tracking_error(e_x: np.ndarray, e_y: np.ndarray) -> np.ndarray:
@@ -43,6 +46,33 @@ def window_statistics(t: np.ndarray, e_tr: np.ndarray, window: tuple[float, floa
         "e_tr_max": float(np.max(values)),
         "e_tr_final": float(values[-1]),
     }
+
+
+def lost_path_time(t: np.ndarray, e_tr: np.ndarray, window: tuple[float, float], bound: float) -> float | None:
+    """When the run lost the path: the start of the final stretch of ``window`` [s] over which e_tr stays beyond
+    ``bound`` [m] to the window's end, when that stretch lasts at least :data:`LOST_PATH_HOLD` of the window; None
+    for a run that tracks (it ends within the bound, or came back long enough before the end)."""
+    mask = window_mask(np.asarray(t), window)
+    times, values = np.asarray(t)[mask], np.asarray(e_tr)[mask]
+    if values.size == 0 or not values[-1] > bound:
+        return None
+    within = np.flatnonzero(~(values > bound))
+    start = float(times[within[-1] + 1]) if within.size else float(times[0])
+    return start if times[-1] - start >= LOST_PATH_HOLD * (window[1] - window[0]) - WINDOW_TOLERANCE else None
+
+
+def rate_ci(count: int, total: int, confidence: float = 0.95) -> dict:
+    """A proportion ``count / total`` with its Wilson score interval (sound at 0 and at ``total``, unlike the
+    normal one): ``mean``, ``ci_low``, ``ci_high`` as fractions, and ``n`` = ``total`` (all None without runs)."""
+    from scipy import stats
+
+    if total == 0:
+        return {"mean": None, "ci_low": None, "ci_high": None, "n": 0}
+    z = float(stats.norm.ppf(0.5 + confidence / 2))
+    p = count / total
+    centre = (p + z**2 / (2 * total)) / (1 + z**2 / total)
+    half = z * math.sqrt(p * (1 - p) / total + z**2 / (4 * total**2)) / (1 + z**2 / total)
+    return {"mean": p, "ci_low": max(0.0, centre - half), "ci_high": min(1.0, centre + half), "n": total}
 
 
 def settling_time(t: np.ndarray, e_tr: np.ndarray, threshold: float) -> float | None:
@@ -223,6 +253,7 @@ def summarize(
     failure_time: float | None = None,
     warnings: Sequence[dict] = (),
     floor_friction: float = 0.8,
+    lost_path_error: float | None = None,
 ) -> dict:
     """The ``metrics.json`` dictionary of a run (docs/guide.md).
 
@@ -246,6 +277,9 @@ def summarize(
         When a failed run failed [s].
     floor_friction : float, optional
         The floor's friction coefficient, against which ``time_above_floor_mu`` counts (``plant.floor_friction``).
+    lost_path_error : float, optional
+        e_tr [m] beyond which a run that stays there to the end has lost the path (:func:`lost_path_time`); None:
+        not judged.
     warnings : sequence of dict, optional
         Why the result may not mean what it seems, each ``{"code", "message"}`` (:func:`ddtrack.runner.run_warnings`).
 
@@ -257,8 +291,12 @@ def summarize(
         (Kx, Ky, Ktheta) where the controller has gains; ``failure_time`` [s] for a failed run; ``warnings``
         (always present, [] when there are none); where the run has ``mu_required`` (a torque-driven plant):
         ``mu_required_max`` (the friction coefficient the run needed), ``time_above_floor_mu`` [s] and
-        ``wheel_speed_max`` [rad/s], over the whole run; where the controller sees odometry (``odom_ex`` in the
-        columns): :func:`odometry_error`'s, over the whole run.
+        ``wheel_speed_max`` [rad/s], over the whole run; on a plant that models grip (``mu_used`` in the columns,
+        :func:`ddtrack.plausibility.grip_used`), ``mu_used_max`` (the most its own contact forces used),
+        ``time_sliding`` [s] and ``wheel_speed_max`` instead; where the controller sees odometry (``odom_ex`` in the
+        columns): :func:`odometry_error`'s, over the whole run; with ``lost_path_error``, ``lost_path`` (bool),
+        ``lost_path_time`` [s] (None while it tracks) and the bound ``lost_path_error`` [m] of a run that ran to its
+        end.
     """
     metrics: dict = {"status": status, "window": [float(window[0]), float(window[1])]}
     keys = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
@@ -269,12 +307,19 @@ def summarize(
         t, e_tr = columns["t"], columns["e_tr"]
         metrics |= window_statistics(t, e_tr, window)
         metrics["settling_time"] = settling_time(t, e_tr, settling_threshold)
+        if lost_path_error is not None:
+            lost = lost_path_time(t, e_tr, window, lost_path_error)
+            metrics |= {"lost_path": lost is not None, "lost_path_time": lost, "lost_path_error": lost_path_error}
         metrics["effort"] = effort(columns["tau_r"], columns["tau_l"], control_period)
         metrics["saturation_fraction"] = saturation_fraction(columns["saturated"]) if "saturated" in columns else 0.0
         if "mu_required" in columns and len(columns["mu_required"]):
             mu = np.asarray(columns["mu_required"])
             metrics["mu_required_max"] = float(np.max(mu))
             metrics["time_above_floor_mu"] = float(np.count_nonzero(mu > floor_friction) * control_period)
+        if "mu_used" in columns and len(columns["mu_used"]):  # a plant that models grip: its own contact forces
+            metrics["mu_used_max"] = float(np.max(columns["mu_used"]))
+            metrics["time_sliding"] = float(np.count_nonzero(columns["sliding"]) * control_period)
+        if ("mu_required" in columns or "mu_used" in columns) and len(columns["wheel_speed_r"]):
             metrics["wheel_speed_max"] = float(np.max(np.abs([columns["wheel_speed_r"], columns["wheel_speed_l"]])))
         if "odom_ex" in columns and len(columns["odom_ex"]):
             metrics |= odometry_error(columns["odom_ex"], columns["odom_ey"], columns["odom_etheta"])

@@ -4,7 +4,8 @@ A no-slip plant never slips and a torque source never runs out of voltage, so a 
 can give. After the fact, from the recorded motion and torques, this module says what was asked:
 
 * the **grip**: the friction coefficient the contact forces needed (:mod:`ddtrack.model.traction`), against the
-  floor's (``plant.floor_friction``) and against any real floor;
+  floor's (``plant.floor_friction``) and against any real floor; on a plant that models grip (a slip plant), the
+  friction its own contact forces used and the time its wheels slid instead (:func:`grip_used`);
 * the **motors**, when the robot is a preset with a datasheet motor: the wheel speed against the motor's no-load
   speed, and the torque against its torque-speed curve at the wheel's speed of the moment.
 
@@ -26,10 +27,29 @@ from .model.motors import torque_envelope
 ENVELOPE_SLACK = 1e-6
 
 
-def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray]:
-    """``mu_required`` (the friction coefficient the run needed, :mod:`ddtrack.model.traction`) and the wheel speeds
-    ``wheel_speed_r``, ``wheel_speed_l`` [rad/s] of a torque-driven run on the true plant ``params``; none for a
-    velocity-input plant, whose speeds jump by command and whose contact forces mean nothing."""
+#: the plant models whose wheels can slip on a floor of finite grip (model.md §1.10): their contact forces are their own
+GRIP_MODELS = ("slip", "slip_velocity")
+
+
+def grip_used(columns: dict, friction: float, slip_speed: float) -> dict[str, np.ndarray]:
+    """What a slip plant's contact forces used of the floor, from its logged slips (model.md §1.10): ``mu_used``,
+    the larger wheel's |F_i| / N_i = mu |s_i| / sqrt(|s_i|^2 + eps_s^2) each period, s_i = (``slip_i``,
+    ``slip_lateral``), never above the floor's mu; and ``sliding`` (1.0 where either wheel's contact slid faster than
+    eps_s, the friction fully developed, else 0.0)."""
+    lateral = np.asarray(columns["slip_lateral"], dtype=float)
+    speeds = np.hypot([columns["slip_r"], columns["slip_l"]], lateral)
+    used = friction * speeds / np.sqrt(speeds**2 + slip_speed**2)
+    return {"mu_used": np.max(used, axis=0), "sliding": np.any(speeds > slip_speed, axis=0).astype(float)}
+
+
+def traction_columns(
+    params: RobotParams, columns: dict, floor: tuple[float, float] | None = None
+) -> dict[str, np.ndarray]:
+    """The grip a torque-driven run on the true plant ``params`` needed, and its wheel speeds ``wheel_speed_r``,
+    ``wheel_speed_l`` [rad/s]; none for a velocity-input plant, whose speeds jump by command and whose contact forces
+    mean nothing. On a plant that models grip (``floor``: its friction mu and slip speed eps_s, and slips in the
+    columns) the grip its own contact forces used (:func:`grip_used`); on any other, ``mu_required``, what rolling
+    without slip needed (:mod:`ddtrack.model.traction`)."""
     if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
         return {}
     geometry = {
@@ -44,11 +64,19 @@ def traction_columns(params: RobotParams, columns: dict) -> dict[str, np.ndarray
         right, left = traction.wheel_speeds(
             columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius), half_axle=float(params.half_axle)
         )
+    if floor is not None and "slip_r" in columns:
+        return grip_used(columns, *floor) | {"wheel_speed_r": right, "wheel_speed_l": left}
     return {
         "mu_required": traction.required_friction(columns["t"], columns["v"], columns["omega"], **geometry),
         "wheel_speed_r": right,
         "wheel_speed_l": left,
     }
+
+
+def slip_floor(scenario: Any) -> tuple[float, float] | None:
+    """(mu, eps_s) of the scenario's floor where its plant models grip (:data:`GRIP_MODELS`), else None."""
+    plant = scenario.plant
+    return (plant.floor_friction, plant.slip_speed) if plant.model in GRIP_MODELS else None
 
 
 def motor_metrics(motor: DCMotor, columns: dict, control_period: float) -> dict[str, float]:

@@ -1,7 +1,8 @@
 """The leaderboard of ``ddtrack bench --suite robots`` (:mod:`ddtrack.robot_suite`), from its runs' records: per
-robot, each controller's mean tracking error per condition with a 95 % interval over seeds, its failures and the runs
-that asked for more than the robot has; whether the paper robot's ranking survives on the others (Kendall's tau);
-and the NN-adaptive law's paired improvement."""
+robot, each controller's mean tracking error per condition with a 95 % interval over seeds, its failures, the runs
+that lost the path (counted apart, never averaged in) and the runs that asked for more than the robot has; whether
+the paper robot's ranking survives on the others (Kendall's tau); and the NN-adaptive law's paired improvement over
+the pairs where both laws tracked."""
 
 from __future__ import annotations
 
@@ -13,12 +14,13 @@ import numpy as np
 import pyarrow as pa
 
 from ._format import interval_text, significant
-from .board import IMPLAUSIBLE, interval_columns, warning_codes
-from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement
+from .board import IMPLAUSIBLE, interval_columns, tracking_value, warning_codes
+from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement, rate_ci
 
 
 def rows(records: dict[str, dict]) -> list[dict]:
-    """One flat row per run of the suite: its cell, status, tracking error, and whether it was plausible."""
+    """One flat row per run of the suite: its cell, status, whether it lost the path, its tracking error (None
+    unless it tracked to the end), and whether it was plausible."""
     out = []
     for record in records.values():
         labels = record["configuration"].get("labels") or {}
@@ -31,7 +33,8 @@ def rows(records: dict[str, dict]) -> list[dict]:
                 "seed": record["seed"],
                 "status": record["status"],
                 **{k: labels[k] for k in ("robot", "trajectory", "condition")},
-                "e_tr_mean": metrics.get("e_tr_mean") if record["status"] == "ok" else None,
+                "lost": record["status"] == "ok" and bool(metrics.get("lost_path")),
+                "e_tr_mean": tracking_value({"status": record["status"], **metrics}),
                 "implausible": bool(warning_codes(metrics) & set(IMPLAUSIBLE)),
             }
         )
@@ -40,7 +43,7 @@ def rows(records: dict[str, dict]) -> list[dict]:
 
 def over_seeds(runs: list[dict]) -> dict:
     """Mean e_tr [95 % CI over seeds]: each seed's mean over ``runs`` (paths, conditions), then the interval over
-    the seeds, the only random part; a seed with a failed run counts as missing."""
+    the seeds, the only random part; a seed with a failed or lost run counts as missing."""
     by_seed: dict[int, list] = {}
     for r in runs:
         by_seed.setdefault(r["seed"], []).append(r["e_tr_mean"])
@@ -50,7 +53,8 @@ def over_seeds(runs: list[dict]) -> dict:
 
 def robot_board(runs: list[dict], robot: str, entries: Sequence[str], conditions: Sequence[str]) -> list[dict]:
     """Per controller on ``robot``: mean e_tr over its paths [95 % CI over seeds] per condition and over all its
-    runs, failures, runs flagged implausible; ranked by the nominal condition's mean."""
+    runs, failures, runs that lost the path (``lost``, and ``lost_rate`` with its Wilson interval), runs flagged
+    implausible; ranked by the nominal condition's mean."""
     board = []
     for label in entries:
         mine = [r for r in runs if r["robot"] == robot and r["controller"] == label]
@@ -62,6 +66,8 @@ def robot_board(runs: list[dict], robot: str, entries: Sequence[str], conditions
                 "controller": label,
                 "runs": len(mine),
                 "failures": sum(r["status"] != "ok" for r in mine),
+                "lost": sum(bool(r.get("lost")) for r in mine),
+                "lost_rate": rate_ci(sum(bool(r.get("lost")) for r in mine), len(mine)),
                 "implausible": sum(r["implausible"] for r in mine),
                 "all": over_seeds(mine),
                 **{c: summary for c, summary in by_condition.items() if summary["n"] + summary["missing"]},
@@ -73,7 +79,8 @@ def robot_board(runs: list[dict], robot: str, entries: Sequence[str], conditions
 
 def paired(runs: list[dict], robot: str, baseline: str, candidate: str) -> dict | None:
     """The pooled paired improvement [%] of ``candidate`` over ``baseline`` on ``robot``, pairing runs by
-    (trajectory, condition, seed); None if either did not run there."""
+    (trajectory, condition, seed), over the pairs where both tracked to the end (``n``; ``missing``: the pairs
+    where either failed or lost the path); None if either did not run there."""
 
     def cell(r: dict) -> tuple:
         return r["trajectory"], r["condition"], r["seed"]
@@ -167,17 +174,19 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         lines += [
             f"### {robot}",
             "",
-            "mean e_tr in m, with its 95 % CI over seeds, ranked by the nominal condition; "
-            "implausible: runs that asked for more grip, wheel speed or torque than the robot has",
+            "mean e_tr in m, with its 95 % CI over seeds, over the runs that tracked, ranked by the nominal condition; "
+            "lost: runs that ended off the path (e_tr beyond a quarter of the path's width for the last fifth of the "
+            "window), with the rate's 95 % interval; implausible: runs that asked for more grip, wheel speed or "
+            "torque than the robot has",
             "",
         ]
-        lines.append("| controller | " + " | ".join(shown) + " | all | failures | implausible |")
-        lines.append("|" + "---|" * (len(shown) + 4))
+        lines.append("| controller | " + " | ".join(shown) + " | all | failures | lost [%] | implausible |")
+        lines.append("|" + "---|" * (len(shown) + 5))
         for e in board:
             values = " | ".join(interval_text(e.get(c)) for c in shown)
             lines.append(
                 f"| {e['controller']} | {values} | {interval_text(e['all'])} | {e['failures']}/{e['runs']} | "
-                f"{e['implausible']}/{e['runs']} |"
+                f"{e['lost']}: {interval_text(e['lost_rate'], 100.0)} | {e['implausible']}/{e['runs']} |"
             )
         lines.append("")
     if summary["ranking_agreement"]:
@@ -210,14 +219,16 @@ def board_markdown(summary: dict, conditions: Sequence[str]) -> str:
         lines += [
             "### Does the paper's NN-adaptive law help?",
             "",
-            "Pooled paired improvement of mean e_tr in %, with its 95 % CI, over every cell the two share "
-            "(positive: the NN-adaptive law tracks better):",
+            "Pooled paired improvement of mean e_tr in %, with its 95 % CI, over the cells the two share where both "
+            "tracked to the end (positive: the NN-adaptive law tracks better); pairs: used of shared:",
             "",
             "| robot | comparison | improvement [%] | pairs |",
             "|---|---|---|---|",
         ]
         for robot, question, value in answers:
-            lines.append(f"| {robot} | {question} | {interval_text(value)} | {value['n']} |")
+            lines.append(
+                f"| {robot} | {question} | {interval_text(value)} | {value['n']} of {value['n'] + value['missing']} |"
+            )
         lines.append("")
     if summary["left_out"]:
         why: dict[tuple[str, str], set[str]] = {}
@@ -238,8 +249,8 @@ def board_table(summary: dict, conditions: Sequence[str]) -> pa.Table:
     flat = []
     for robot, board in summary["boards"].items():
         for e in board:
-            row = {"robot": robot, **{k: e[k] for k in ("controller", "runs", "failures", "implausible")}}
-            for key in ("all", *conditions):
+            row = {"robot": robot, **{k: e[k] for k in ("controller", "runs", "failures", "lost", "implausible")}}
+            for key in ("all", "lost_rate", *conditions):
                 row |= interval_columns(key, e.get(key))
             flat.append(row)
     return pa.Table.from_pylist(flat)

@@ -21,6 +21,7 @@ import numpy as np
 from jax import Array
 
 from . import feasibility
+from ._format import significant
 from .adaptation import adaptation_warnings
 from .compilations import padded_length
 from .controllers import Controller, Emulator, TorqueLaw
@@ -29,7 +30,14 @@ from .layout import BODY, WHEEL_TORQUES
 from .metrics import summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
-from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
+from .plausibility import (
+    motor_metrics,
+    motor_warnings,
+    slip_floor,
+    speed_warnings,
+    traction_columns,
+    traction_warnings,
+)
 from .precision import float64_in_this_thread
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import motor_or_none
@@ -326,7 +334,8 @@ def run_options(scenario: Scenario) -> dict:
 
 
 #: the series metrics and warnings read
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", *ODOMETRY_ERROR.names)
+METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", "slip_r", "slip_l", "slip_lateral",
+               *ODOMETRY_ERROR.names)  # fmt: skip
 #: a slip plant's wheel spin speeds, at which the motor's curve is checked (:func:`traction_columns`)
 WHEEL_SPINS = ("phidot_r", "phidot_l")
 
@@ -340,11 +349,25 @@ def run_warnings(
     ``nmse``, the emulator's identification NMSE per output, or None)."""
     return [
         *feasibility.check(scenario),
+        *lost_path_warnings(metrics),
         *traction_warnings(scenario, metrics),
         *motor_warnings(scenario, metrics),
         *speed_warnings(scenario, columns, metrics),
         *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse]),
     ]
+
+
+def lost_path_warnings(metrics: dict) -> list[dict]:
+    """A run that ended off its path (``lost_path``): its error statistics describe a robot no longer tracking."""
+    if not metrics.get("lost_path"):
+        return []
+    message = (
+        f"the robot is off its path: e_tr stayed beyond {significant(metrics['lost_path_error'])} m "
+        f"(simulation.lost_path_error) from t = {metrics['lost_path_time']:g} s to the end of the metric window "
+        "(it lost the path, or never reached it); its error statistics measure how far off it was, not how well it "
+        "tracks, and benchmarks count it apart"
+    )
+    return [{"code": "lost_path", "message": message}]
 
 
 def run_metrics(
@@ -354,8 +377,11 @@ def run_metrics(
     status: str,
     failure_time: float | None = None,
     nmse: Array | Sequence[float] | None = None,
+    lost_path_error: float | None = None,
 ) -> dict:
-    """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings."""
+    """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings; the
+    lost-path bound is the scenario's (:meth:`~ddtrack.scenario.Scenario.lost_path_distance`) unless given (a
+    batch computes it once)."""
     sim = scenario.simulation
     metrics = summarize(
         columns,
@@ -365,6 +391,7 @@ def run_metrics(
         settling_threshold=sim.settling_threshold,
         failure_time=failure_time,
         floor_friction=scenario.plant.floor_friction,
+        lost_path_error=scenario.lost_path_distance() if lost_path_error is None else lost_path_error,
     )
     motor = motor_or_none(scenario) if status == "ok" else None  # the preset's datasheet, [plant.motor] over it
     if motor is not None:  # a preset's datasheet motor: what the run asked of it, before the warnings
@@ -382,7 +409,7 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
     """(columns, metrics) of a finished single run as ``ddtrack run`` writes them: the time series with the grip it
     needed (:func:`traction_columns`), and ``metrics.json`` (:func:`run_metrics`, the identification NMSE included)."""
     columns = timeseries(result)
-    columns |= traction_columns(setup.plant_params, columns)
+    columns |= traction_columns(setup.plant_params, columns, slip_floor(scenario))
     nmse = None if setup.identification is None else setup.identification.nmse
     metrics = run_metrics(scenario, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
     return columns, metrics
@@ -423,6 +450,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
+    lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
     metrics = []
     for i in range(len(status)):
         k = int(failure_index[i])
@@ -430,7 +458,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
         columns = {name: value[valid] for name, value in columns.items()}
         columns |= traction_columns(
-            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns
+            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, slip_floor(scenario)
         )
         metrics.append(
             run_metrics(
@@ -439,6 +467,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
                 status=STATUS_NAMES[int(status[i])],
                 failure_time=None if k < 0 else float(t[k]),
                 nmse=None if nmse is None else nmse[i],
+                lost_path_error=lost_path_error,
             )
         )
     return metrics

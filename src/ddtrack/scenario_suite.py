@@ -22,7 +22,7 @@ from typing import Any
 import pyarrow as pa
 
 from ._format import interval_text, significant
-from .board import GRIP, MOTOR, STATISTICS, interval_columns, run_statistics, warning_codes, write_board
+from .board import GRIP, MOTOR, STATISTICS, interval_columns, run_statistics, tracking_value, warning_codes, write_board
 from .errors import ConfigError
 from .metrics import pooled_improvement
 from .robot_suite import default_entries, entry_controller, entry_labels, suite_entry
@@ -220,23 +220,20 @@ def rows(records: Mapping[str, dict]) -> list[dict]:
     return sorted(out, key=lambda r: (r["entry"], r["seed"]))
 
 
-def _error(row: dict) -> float | None:
-    return row.get("e_tr_mean") if row["status"] == "ok" else None
-
-
 def leaderboard(records: Mapping[str, dict], entries: Sequence[BenchEntry]) -> list[dict]:
     """Per entry: the statistics of its runs (:func:`ddtrack.board.run_statistics`), runs ok, diverged (or
-    non-finite) and raised, runs flagged for grip and for the motors, each seed's mean e_tr, and the pooled paired
-    improvement of the mean e_tr over the first entry's, by seed; ranked by mean e_tr."""
+    non-finite) and raised, runs that lost the path, runs flagged for grip and for the motors, each seed's mean
+    e_tr, and the pooled paired improvement of the mean e_tr over the first entry's, by seed, over the seeds where
+    both tracked; ranked by mean e_tr."""
     runs = rows(records)
-    reference = {r["seed"]: _error(r) for r in runs if r["entry"] == entries[0].label}
+    reference = {r["seed"]: tracking_value(r) for r in runs if r["entry"] == entries[0].label}
     board = []
     for entry in entries:
         mine = [r for r in runs if r["entry"] == entry.label]
         improvement = None
         if entry.label != entries[0].label:
             baselines = [reference[r["seed"]] if r["seed"] in reference else None for r in mine]
-            improvement = pooled_improvement(baselines, [_error(r) for r in mine])
+            improvement = pooled_improvement(baselines, [tracking_value(r) for r in mine])
         board.append(
             {
                 "entry": entry.label,
@@ -247,11 +244,17 @@ def leaderboard(records: Mapping[str, dict], entries: Sequence[BenchEntry]) -> l
                 "errors": sum(r["status"] not in ("ok", "diverged", "non_finite") for r in mine),
                 "grip": sum(r["grip"] for r in mine),
                 "motor": sum(r["motor"] for r in mine),
-                "e_tr_mean_by_seed": {str(r["seed"]): _error(r) for r in mine},
+                "e_tr_mean_by_seed": {str(r["seed"]): tracking_value(r) for r in mine},
+                "status_by_seed": {str(r["seed"]): _outcome(r) for r in mine},
                 "improvement": improvement,
             }
         )
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
+
+
+def _outcome(row: dict) -> str:
+    """``ok``, ``lost`` (ran to the end off the path) or the failure's status."""
+    return "lost" if row["status"] == "ok" and row.get("lost_path") else row["status"]
 
 
 def board_markdown(board: Sequence[dict], reference: str) -> str:
@@ -260,18 +263,21 @@ def board_markdown(board: Sequence[dict], reference: str) -> str:
     lines = [
         "Mean [95 % CI] over seeds; e_tr over each run's metric window. vs "
         f"{reference}: the pooled paired improvement of mean e_tr over the first --scenario entry, by seed "
-        "(positive: better). grip, motor: runs that asked for more grip than the floor has, or more wheel speed "
-        "or torque than the motors give.",
+        "(positive: better), over the seeds where both tracked. lost: runs that ended off the path (e_tr beyond "
+        "simulation.lost_path_error for the last fifth of the window), counted apart like the diverged ones. "
+        "grip, motor: runs that asked for more grip than the floor has, or more wheel speed or torque than the "
+        "motors give.",
         "",
         "| entry | controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] "
-        f"| ok | diverged | grip | motor | vs {reference} [%] |",
-        "|" + "---|" * 12,
+        f"| tracked | diverged | lost | grip | motor | vs {reference} [%] |",
+        "|" + "---|" * 13,
     ]
     for e in board:
         lines.append(
             f"| {e['entry']} | {e['controller']} | {interval_text(e['e_tr_mean'])} | {interval_text(e['e_tr_rms'])} "
             f"| {interval_text(e['e_tr_max'])} | {interval_text(e['effort'])} "
-            f"| {interval_text(e['saturation_fraction'], 100.0)} | {e['ok']}/{e['runs']} | {e['diverged']} "
+            f"| {interval_text(e['saturation_fraction'], 100.0)} | {e['ok'] - e['lost']}/{e['runs']} | {e['diverged']} "
+            f"| {e['lost']} "
             f"| {e['grip']}/{e['runs']} | {e['motor']}/{e['runs']} | {interval_text(e['improvement'])} |"
         )
     seeds = sorted({int(s) for e in board for s in e["e_tr_mean_by_seed"]})
@@ -286,8 +292,12 @@ def board_markdown(board: Sequence[dict], reference: str) -> str:
     lines.append("| entry | " + " | ".join(f"seed {s}" for s in seeds) + " |")
     lines.append("|" + "---|" * (len(seeds) + 1))
     for e in board:
-        values = [e["e_tr_mean_by_seed"].get(str(s)) for s in seeds]
-        shown = ("failed" if v is None else significant(v) for v in values)
+        shown = (
+            significant(e["e_tr_mean_by_seed"][str(s)])
+            if e["e_tr_mean_by_seed"].get(str(s)) is not None
+            else e["status_by_seed"].get(str(s), "")
+            for s in seeds
+        )
         lines.append(f"| {e['entry']} | " + " | ".join(shown) + " |")
     return "\n".join(lines) + "\n"
 
@@ -303,7 +313,7 @@ def board_table(board: Sequence[dict]) -> pa.Table:
     a ci_high column per statistic and for the improvement."""
     flat = []
     for e in board:
-        row = {k: e[k] for k in ("entry", "controller", "runs", "ok", "diverged", "errors", "grip", "motor")}
+        row = {k: e[k] for k in ("entry", "controller", "runs", "ok", "diverged", "errors", "lost", "grip", "motor")}
         for key in (*STATISTICS, "improvement"):
             row |= interval_columns(key, e[key])
         flat.append(row)

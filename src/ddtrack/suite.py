@@ -22,7 +22,7 @@ import pyarrow as pa
 
 from ._format import interval_text as _ci
 from ._format import significant
-from .board import STATISTICS, interval_columns, run_statistics, write_board
+from .board import STATISTICS, interval_columns, run_statistics, tracking_value, write_board
 from .errors import ConfigError
 from .metrics import pooled_improvement
 from .outdir import atomic_write
@@ -217,8 +217,9 @@ def _rows(records: dict[str, dict], study: str) -> list[dict]:
 
 
 def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[dict]:
-    """Per controller over every leaderboard cell: mean and 95 % CI of each statistic (over runs), failures, and
-    the paired improvement of the mean tracking error over backstepping and over tuned backstepping."""
+    """Per controller over every leaderboard cell: mean and 95 % CI of each statistic (over the runs that tracked),
+    failures, runs that lost the path, and the paired improvement of the mean tracking error over backstepping and
+    over tuned backstepping (over the pairs where both tracked)."""
     rows = _rows(records, "leaderboard")
     by_cell = {(r["controller"], r["trajectory"], r["level"], r["seed"]): r for r in rows}
     board = []
@@ -230,7 +231,9 @@ def leaderboard(records: dict[str, dict], controllers: Sequence[str]) -> list[di
             entry[f"improvement_over_{reference}"] = (
                 None
                 if reference == name
-                else pooled_improvement([o.get("e_tr_mean") for o in others], [r.get("e_tr_mean") for r in mine])
+                else pooled_improvement(
+                    [tracking_value(o) if o else None for o in others], [tracking_value(r) for r in mine]
+                )
             )
         board.append(entry)
     return sorted(board, key=lambda e: math.inf if e["e_tr_mean"]["mean"] is None else e["e_tr_mean"]["mean"])
@@ -242,16 +245,25 @@ def board_markdown(board: list[dict], cells: dict) -> str:
     (``cells``, from :func:`cell_means`)."""
     lines = [
         "| controller | mean e_tr [m] | RMS e_tr [m] | max e_tr [m] | effort [N² m² s] | saturated [%] | failures "
-        "| vs backstepping [%] | vs tuned backstepping [%] |",
-        "|" + "---|" * 9,
+        "| lost [%] | vs backstepping [%] | vs tuned backstepping [%] |",
+        "|" + "---|" * 10,
     ]
     for e in board:
         lines.append(
             f"| {e['controller']} | {_ci(e['e_tr_mean'])} | {_ci(e['e_tr_rms'])} | {_ci(e['e_tr_max'])} | "
             f"{_ci(e['effort'])} | {_ci(e['saturation_fraction'], 100.0)} | {e['failures']}/{e['runs']} | "
+            f"{e['lost']}: {_ci(e['lost_rate'], 100.0)} | "
             f"{_ci(e['improvement_over_' + BASELINE])} | {_ci(e['improvement_over_' + TUNED])} |"
         )
-    lines += ["", "Mean e_tr [m] per trajectory and uncertainty level (mean over seeds; failed runs left out):", ""]
+    lines += [
+        "",
+        "Statistics over the runs that tracked to the end; lost: runs that ended off the path (e_tr beyond a quarter "
+        "of the reference's width for the last fifth of the window), with the rate's 95 % interval; improvements "
+        "over the pairs where both tracked.",
+        "",
+        "Mean e_tr [m] per trajectory and uncertainty level (mean over seeds; failed and lost runs left out):",
+        "",
+    ]
     columns = sorted({(t, lv) for (_, t, lv) in cells})
     lines.append("| controller | " + " | ".join(f"{t} / {lv}" for t, lv in columns) + " |")
     lines.append("|" + "---|" * (len(columns) + 1))
@@ -265,7 +277,7 @@ def cell_means(records: dict[str, dict]) -> dict[tuple[str, str, str], float]:
     """Mean e_tr_mean [m] over the successful seeds of each (controller, trajectory, level) of the leaderboard."""
     groups: dict[tuple, list[float]] = {}
     for r in _rows(records, "leaderboard"):
-        if r["status"] == "ok" and r.get("e_tr_mean") is not None:
+        if tracking_value(r) is not None:
             groups.setdefault((r["controller"], r["trajectory"], r["level"]), []).append(r["e_tr_mean"])
     return {k: float(np.mean(v)) for k, v in groups.items()}
 
@@ -275,8 +287,8 @@ def board_table(board: list[dict]) -> pa.Table:
     ci_low and a ci_high column per statistic and improvement."""
     flat = []
     for e in board:
-        row = {"controller": e["controller"], "runs": e["runs"], "failures": e["failures"]}
-        for key in (*STATISTICS, f"improvement_over_{BASELINE}", f"improvement_over_{TUNED}"):
+        row = {"controller": e["controller"], "runs": e["runs"], "failures": e["failures"], "lost": e["lost"]}
+        for key in (*STATISTICS, "lost_rate", f"improvement_over_{BASELINE}", f"improvement_over_{TUNED}"):
             row |= interval_columns(key, e[key])
         flat.append(row)
     return pa.Table.from_pylist(flat)

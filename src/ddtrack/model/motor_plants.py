@@ -5,7 +5,8 @@ The body is the Lagrangian robot of model.md §1.3 with its wheels' spin inertia
 :class:`~ddtrack.model.motors.DCMotor` (constants referred to the wheel), and the board in front of it decides
 what a controller's command means:
 
-* :class:`TorqueDrivenPlant`: a current-controlled board (:func:`~ddtrack.model.motors.torque_driver`). The
+* :class:`TorqueDrivenPlant`: a current-controlled board (:func:`~ddtrack.model.motors.torque_driver`), or a
+  PWM-only one turning torque into voltage through its model of the motor. The
   controller commands wheel torques; the motor applies them inside the torque-speed curve at the wheels' speed of
   the moment, so a wheel that speeds up within a period loses torque as it goes and never passes its no-load speed.
 * :class:`VelocityDrivenPlant`: a board with a PI loop on each wheel's speed
@@ -31,7 +32,7 @@ from jax import Array
 from .._pytree import pytree_dataclass
 from ..layout import BODY, VELOCITY_COMMAND, Layout, velocity
 from .dynamics import reduced_coriolis, reduced_input_inverse, wheel_friction, wheel_speeds
-from .motors import DCMotor, VelocityDriver, torque_driver
+from .motors import DCMotor, VelocityDriver, drive_torque
 from .params import RobotParams
 from .plants import DynamicPlant, ODEPlant
 
@@ -75,15 +76,19 @@ class TorqueDrivenPlant(ODEPlant):
         rotor inertia).
     motor : DCMotor
         The motor of each wheel, constants referred to the wheel.
+    pwm_model : DCMotor or None
+        None: the board controls current. Else it offers PWM only, and turns the torque command into a voltage
+        through this model of its motor (:func:`~ddtrack.model.motors.drive_torque`).
     """
 
     params: RobotParams
     motor: DCMotor
+    pwm_model: DCMotor | None = None
     logged_layout: ClassVar[Layout] = MOTOR_LOGS
 
     def applied(self, x: Array, u: Array) -> tuple[Array, Array]:
         """(torques [N m], currents [A]) the motors give at state ``x`` under the command ``u``, each (2,)."""
-        return torque_driver(self.motor, u, wheel_speeds(self.params, velocity(x)))
+        return drive_torque(self.motor, u, wheel_speeds(self.params, velocity(x)), self.pwm_model)
 
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
         """[x_dot, y_dot, theta_dot, v_dot, omega_dot] under the applied, not the commanded, torques."""
@@ -186,15 +191,17 @@ def _like_batch(tree: T, params: RobotParams) -> T:
     return jax.tree_util.tree_map(lambda leaf: jnp.broadcast_to(jnp.asarray(leaf, dtype=float), batch), tree)
 
 
-def torque_driven_model(motor: DCMotor) -> Callable[[RobotParams], TorqueDrivenPlant]:
-    """A ``Setup.plant_model`` that puts ``motor`` (a current-controlled board) at each wheel of the drawn robot.
+def torque_driven_model(motor: DCMotor, pwm_model: DCMotor | None = None) -> Callable[[RobotParams], TorqueDrivenPlant]:
+    """A ``Setup.plant_model`` that puts ``motor`` (a current-controlled board, or PWM through ``pwm_model``) at each
+    wheel of the drawn robot.
 
     The motor's leaves take the parameters' leading batch axis, so the same model serves a single run and a batch
     (``dataclasses.replace(setup, plant_model=torque_driven_model(motor))``).
     """
 
     def plant_model(params: RobotParams) -> TorqueDrivenPlant:
-        return TorqueDrivenPlant(params, _like_batch(motor, params))
+        pwm = None if pwm_model is None else _like_batch(pwm_model, params)
+        return TorqueDrivenPlant(params, _like_batch(motor, params), pwm)
 
     return plant_model
 

@@ -213,6 +213,18 @@ def torque_feedforward(motor: DCMotor, tau_command: Array, wheel_speed: Array) -
     return motor.resistance * jnp.asarray(tau_command) / gain + motor.back_emf * jnp.asarray(wheel_speed)
 
 
+def drive_torque(
+    motor: DCMotor, tau_command: Array, wheel_speed: Array, pwm_model: DCMotor | None = None
+) -> tuple[Array, Array]:
+    """(torque [N m], current [A]) a board gives ``motor`` for a torque command: current control
+    (:func:`torque_driver`) when ``pwm_model`` is None, else PWM, the command turned into a voltage through the
+    board's own model of its motor (:func:`torque_feedforward` of ``pwm_model``, e.g. the datasheet's while the true
+    motor differs) and applied by :func:`voltage_driver`: what a servo without a current mode offers a torque law."""
+    if pwm_model is None:
+        return torque_driver(motor, tau_command, wheel_speed)
+    return voltage_driver(motor, torque_feedforward(pwm_model, tau_command, wheel_speed), wheel_speed)
+
+
 def current_rate(motor: DCMotor, voltage: Array, current: Array, wheel_speed: Array) -> Array:
     """di/dt = (u - R_a i - k_e phi_dot) / L_a [A/s], the armature's ODE for a motor with inductance (model.md §1.7).
 

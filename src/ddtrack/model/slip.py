@@ -35,7 +35,7 @@ from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4, rosenbrock2
 from ..layout import WHEEL_TORQUES, Layout
 from .dynamics import wheel_friction
-from .motors import DCMotor, torque_driver
+from .motors import DCMotor, drive_torque
 from .params import RobotParams
 from .traction import GRAVITY
 
@@ -92,6 +92,9 @@ class SlipPlant:
     motor : DCMotor or None
         When given, the torque command goes through its current-controlled driver, so back-EMF bounds the wheels'
         spin; else the torques apply as commanded, within +-``params.max_torque``.
+    pwm_model : DCMotor or None
+        With a motor: None for a current-controlled board, else the board's model of its motor, through which it
+        turns the torque command into a PWM voltage (:func:`~ddtrack.model.motors.drive_torque`).
     scheme : str
         ``"rk4"`` or ``"rosenbrock"`` (static).
     substeps : int
@@ -103,6 +106,7 @@ class SlipPlant:
     slip_speed: Array | float = 1e-2
     caster: Array | float = math.inf
     motor: DCMotor | None = None
+    pwm_model: DCMotor | None = None
     scheme: str = static_field(default="rk4")
     substeps: int = static_field(default=1)
     state_layout: ClassVar[Layout] = SLIP_STATE
@@ -134,7 +138,7 @@ class SlipPlant:
         """The wheel torques [N m] at state ``x`` under the command ``u``: through the motor's driver if any."""
         if self.motor is None:
             return u
-        return torque_driver(self.motor, u, x[6:8])[0]
+        return drive_torque(self.motor, u, x[6:8], self.pwm_model)[0]
 
     def slips(self, x: Array) -> tuple[Array, Array, Array]:
         """(longitudinal slip of the right and left contact, lateral slip w) [m/s]."""
@@ -253,20 +257,23 @@ def slip_plant_model(
     period: float = 0.01,
     substeps: int = 10,
     scheme: str | None = None,
+    pwm_model: DCMotor | None = None,
 ) -> Callable[[RobotParams], SlipPlant]:
     """A ``Setup.plant_model`` giving the :class:`SlipPlant` of a drawn robot, alone or as a batch (the scalars
     take the parameters' leading batch axis), its integration chosen once from the ``nominal`` robot (floats) by
     :func:`choose_integration` at control ``period`` [s] and the simulator's ``substeps``.
 
     ``scheme`` forces ``"rk4"`` (with the steps the stability rule needs) or ``"rosenbrock"``. Raises ValueError for
-    J_w <= 0 or a caster not beyond the centre of mass (here and for every drawn robot).
+    J_w <= 0 or a caster not beyond the centre of mass (here and for every drawn robot). ``pwm_model``: the board's
+    model of ``motor`` when it offers PWM only (:class:`SlipPlant`).
     """
     l_c, chosen, steps = slip_integration(nominal, friction, slip_speed, caster, motor, period, substeps, scheme)
 
     def plant_model(params: RobotParams) -> SlipPlant:
         check_drawn(params, l_c)  # a drawn robot too
         mu, eps, held_caster = broadcast_like(params, (friction, slip_speed, l_c))
-        return SlipPlant(params, mu, eps, held_caster, broadcast_like(params, motor), chosen, steps)
+        motors = broadcast_like(params, motor), broadcast_like(params, pwm_model)
+        return SlipPlant(params, mu, eps, held_caster, *motors, scheme=chosen, substeps=steps)
 
     return plant_model
 

@@ -47,6 +47,10 @@ class MotorDatasheet:
         Encoder counts per output revolution.
     source : str
         Where the figures come from.
+    drive_modes : tuple of str
+        The operating modes the servo offers ("current", "velocity", "position", "extended_position",
+        "current_based_position", "pwm"); empty where the datasheet lists none. Without "current" a torque law must
+        drive it by PWM (``plant.motor.drive``).
     """
 
     name: str
@@ -58,6 +62,7 @@ class MotorDatasheet:
     gear_ratio: float
     encoder_counts: int
     source: str
+    drive_modes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

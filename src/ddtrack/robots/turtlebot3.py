@@ -18,13 +18,18 @@ _BAM = (
 BAM_ARMATURE_XL330 = 0.002
 BAM_ARMATURE_MX64 = 0.012
 
+# Operating Mode (control table address 11) as each e-Manual lists it: the XL430 has no Current Control Mode
 XL430_W250 = MotorDatasheet(
     "DYNAMIXEL XL430-W250", 11.1, 1.4, 1.3, rpm(57.0), 0.0, 258.5, 4096,
-    "ROBOTIS e-Manual, XL430-W250 (https://emanual.robotis.com/docs/en/dxl/x/xl430-w250/), 11.1 V; " + _DXL,
+    "ROBOTIS e-Manual, XL430-W250 (https://emanual.robotis.com/docs/en/dxl/x/xl430-w250/), 11.1 V, Operating "
+    "Modes; " + _DXL,
+    ("velocity", "position", "extended_position", "pwm"),
 )  # fmt: skip
 XM430_W210 = MotorDatasheet(
     "DYNAMIXEL XM430-W210", 11.1, 2.7, 2.1, rpm(70.0), 0.0, 212.6, 4096,
-    "ROBOTIS e-Manual, XM430-W210 (https://emanual.robotis.com/docs/en/dxl/x/xm430-w210/), 11.1 V; " + _DXL,
+    "ROBOTIS e-Manual, XM430-W210 (https://emanual.robotis.com/docs/en/dxl/x/xm430-w210/), 11.1 V, Operating "
+    "Modes; " + _DXL,
+    ("current", "velocity", "position", "extended_position", "current_based_position", "pwm"),
 )  # fmt: skip
 
 # The URDF links, as far as yaw matters. A wheel joint is rotated -1.57 rad about x, so the wheel link's y axis is

@@ -79,7 +79,8 @@ COLUMN_UNITS = {
     "ktheta": "1/m",
     "m_hat": "kg",
     "inertia_hat": "kg m^2",
-    **dict.fromkeys(("saturated", "gate", "rotating", "mu_required", "emulator_loss", "fix_clock"), "1"),
+    **dict.fromkeys(("saturated", "gate", "rotating", "mu_required", "mu_used", "sliding", "emulator_loss"), "1"),
+    "fix_clock": "1",
 }
 
 

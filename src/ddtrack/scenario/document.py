@@ -28,6 +28,7 @@ from .sections import (
 )
 
 MAX_DELAY_PERIODS = 1000  #: the longest [sensing] delay in control periods (its queue is part of the plant's state)
+LOST_PATH_FRACTION = 0.25  #: of the reference's width: a run that stays this far off has lost the path
 
 # --- the scenario --------------------------------------------------------------------------------
 
@@ -114,6 +115,15 @@ class Scenario(_Section):
         from ..feasibility import divergence_bound
 
         return divergence_bound(self)
+
+    def lost_path_distance(self) -> float:
+        """``simulation.lost_path_error``, or a quarter of the reference's width (the larger side of its bounding
+        box) [m]: a run that stays that far off to its end is tracking another path."""
+        if self.simulation.lost_path_error is not None:
+            return self.simulation.lost_path_error
+        from ..feasibility import reference_width
+
+        return LOST_PATH_FRACTION * reference_width(self)
 
     def top_speeds(self) -> tuple[float | None, float | None, str]:
         """The true robot's top speed [m/s] and yaw rate [rad/s] (None: nothing bounds it) and what sets them: the

@@ -43,7 +43,9 @@ def motor_or_none(scenario: Any) -> DCMotor | None:
     gives one. Without a preset motor, ``[plant.motor]`` must give the four constants no default can stand for."""
     robot = scenario.robot.preset_robot()
     preset = None if robot is None or robot.motor is None else motor_from_datasheet(robot.motor)
-    given = {} if scenario.plant.motor is None else scenario.plant.motor.model_dump(exclude_none=True)
+    given = (
+        {} if scenario.plant.motor is None else scenario.plant.motor.model_dump(exclude_none=True, exclude={"drive"})
+    )
     if preset is not None:
         return dataclasses.replace(preset, **given)
     if not given:
@@ -60,9 +62,33 @@ def motor_or_none(scenario: Any) -> DCMotor | None:
     return DCMotor(**given)
 
 
+def motor_drive(scenario: Any) -> str:
+    """How the board drives the motor for a torque command: ``plant.motor.drive``, else "pwm" where the preset's servo
+    lists its modes and has no current mode, else "current"."""
+    given = None if scenario.plant.motor is None else scenario.plant.motor.drive
+    if given is not None:
+        return str(given)
+    robot = scenario.robot.preset_robot()
+    modes = () if robot is None or robot.motor is None else robot.motor.drive_modes
+    return "pwm" if modes and "current" not in modes else "current"
+
+
+def pwm_model(scenario: Any) -> DCMotor | None:
+    """The board's model of its motor when it drives by PWM (:func:`motor_drive`), else None: the preset's datasheet
+    motor (what the board's firmware knows; ``[plant.motor]`` describes the true one), or the scenario's motor where
+    no preset gives one."""
+    if motor_drive(scenario) != "pwm":
+        return None
+    robot = scenario.robot.preset_robot()
+    if robot is not None and robot.motor is not None:
+        return motor_from_datasheet(robot.motor)
+    return scenario_motor(scenario)
+
+
 def motor_torque_plant(params: RobotParams, scenario: Any) -> TorqueDrivenPlant:
-    """The drawn robot with its preset's motors under current control (model.md §1.7)."""
-    return torque_driven_model(scenario_motor(scenario))(params)
+    """The drawn robot with its preset's motors under current control, or PWM where the servo offers only that
+    (:func:`motor_drive`; model.md §1.7)."""
+    return torque_driven_model(scenario_motor(scenario), pwm_model(scenario))(params)
 
 
 def motor_velocity_plant(params: RobotParams, scenario: Any) -> VelocityDrivenPlant:

@@ -43,6 +43,15 @@ class SimulationConfig(_Section):
         ),
     )
 
+    lost_path_error: Positive | None = Field(
+        None,
+        description=(
+            "Tracking error [m] beyond which a run that stays there for the last fifth of its metric window, without "
+            "coming back, has lost the path (metrics lost_path, lost_path_time; benchmarks count it apart from the "
+            "runs that track); default a quarter of the reference's width, the larger side of its bounding box."
+        ),
+    )
+
     @model_validator(mode="after")
     def _consistent(self) -> SimulationConfig:
         steps = self.duration / self.control_period
@@ -163,6 +172,15 @@ class MotorConfig(_Section):
     supply_voltage: Positive | None = Field(None, description="The most voltage the driver applies, V_s [V].")
     current_limit: Positive | None = Field(
         None, description="The driver's current limit i_max [A]; default V_s / R_a without a preset."
+    )
+    drive: Literal["current", "pwm"] | None = Field(
+        None,
+        description=(
+            "How the board turns a torque law's command into motor drive: 'current' (current control, the torque "
+            "met inside the torque-speed curve) or 'pwm' (a voltage from the datasheet motor's model at the measured "
+            "wheel speed, for servos without a current mode); default 'current' where the preset's servo has a "
+            "current mode or no preset, else 'pwm' (the TurtleBot3 Burger's XL430)."
+        ),
     )
 
 

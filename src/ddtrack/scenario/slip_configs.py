@@ -17,7 +17,7 @@ from ..errors import ConfigError
 from ..model import RobotParams, VelocityDriver
 from ..model.slip import SlipPlant, slip_plant_model
 from ..model.slip_velocity import SlipVelocityPlant, slip_velocity_model
-from .motor_configs import motor_or_none, scenario_motor
+from .motor_configs import motor_or_none, pwm_model, scenario_motor
 
 
 def _preset(scenario: Any) -> Any:
@@ -54,6 +54,7 @@ def slip_options(scenario: Any) -> dict[str, Any]:
         "slip_speed": scenario.plant.slip_speed,
         "caster": caster,
         "motor": motor,
+        "pwm_model": None if motor is None else pwm_model(scenario),
         "period": sim.control_period,
         "substeps": sim.substeps,
     }
@@ -73,7 +74,7 @@ def slip_velocity_plant_config(params: RobotParams, scenario: Any) -> SlipVeloci
     (model.md §1.10); a ConfigError naming ``plant.model`` if the preset has no motor."""
     driver = VelocityDriver(scenario_motor(scenario), *scenario.plant.velocity_pi)
     options = slip_options(scenario)
-    del options["motor"]  # the loop drives the preset's motor
+    del options["motor"], options["pwm_model"]  # the loop drives the preset's motor
     model = slip_velocity_model(scenario.plant_params(), driver, **options)
     try:
         return model(params)
