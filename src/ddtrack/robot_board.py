@@ -275,5 +275,5 @@ def figure(summary: dict, conditions: Sequence[str]) -> Any:
         ax.set_xticklabels(conditions, rotation=90)
         ax.set_yticklabels([e["controller"] for e in board], fontsize=7)
     if image is not None:
-        fig.colorbar(image, ax=axes, label="mean e_tr [m] (blank: left out or failed)")
+        fig.colorbar(image, ax=axes, label="mean e_tr [m] (blank: left out, failed or lost)")
     return fig
