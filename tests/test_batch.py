@@ -242,6 +242,8 @@ def test_mc_of_one_run_prints_its_mean_without_an_interval(tmp_path, cli):
         "simulation.duration=2",
         "--set",
         "simulation.metric_window=[0, 2]",
+        "--set",
+        "simulation.lost_path_error=100",  # 2 s do not reach the line 7 m away: judged on, not off, its path
         "--out",
         tmp_path / "mc",
     )

@@ -102,6 +102,9 @@ def test_metrics_json(paper_line_run):
         "mu_required_max",
         "time_above_floor_mu",
         "wheel_speed_max",
+        "lost_path",
+        "lost_path_time",
+        "lost_path_error",
     } == set(metrics)
     assert metrics["status"] == "ok" and metrics["window"] == [20.0, 40.0]
     assert metrics["final_gains"] == [1.0, 55.0, 15.0]

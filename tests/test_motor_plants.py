@@ -335,7 +335,7 @@ def test_a_pwm_board_drives_through_its_model_of_the_motor():
     ],
 )
 def test_a_torque_law_on_a_servo_without_a_current_mode_drives_it_by_pwm_and_says_so(robot, overrides, drive, says):
-    from ddtrack import feasibility
+    from ddtrack.scenario.motor_configs import check_drive
 
     scenario = ddtrack.load_scenario(
         SCENARIOS / "burger_sized_20hz.toml",
@@ -344,11 +344,11 @@ def test_a_torque_law_on_a_servo_without_a_current_mode_drives_it_by_pwm_and_say
     )
     plant = prepare(scenario)[0].plant
     assert isinstance(plant, TorqueDrivenPlant) and (plant.pwm_model is not None) == (drive == "pwm")
-    warnings = [w for w in feasibility.check(scenario) if w["code"] == "drive_not_offered"]
+    warnings = check_drive(scenario)
     assert [says in w["message"] for w in warnings] == ([] if says is None else [True])
     velocity = ddtrack.load_scenario(
         SCENARIOS / "burger_sized_20hz.toml",
         overrides=[*SHORT, f'robot.preset="{robot}"', "plant.model=motor_velocity"],
         controller="kinematic_backstepping",
     )
-    assert all(w["code"] != "drive_not_offered" for w in feasibility.check(velocity))  # cmd_vel: as the robot runs
+    assert check_drive(velocity) == []  # cmd_vel: as the robot runs

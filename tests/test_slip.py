@@ -143,7 +143,7 @@ def test_the_light_wheel_takes_the_rosenbrock_step_and_it_matches_fine_rk4():
     assert (plant.scheme, plant.substeps) == ("rosenbrock", 20)
     torques, x0 = wavy_torques(50) * 0.5, plant.init(jnp.zeros(5))
     implicit = rollout(plant, x0, torques, plant.substeps)
-    fine = rollout(SlipPlant(params, 0.8, 1e-2, jnp.inf, None, "rk4", 400), x0, torques, 400)
+    fine = rollout(SlipPlant(params, 0.8, 1e-2, jnp.inf, None, scheme="rk4", substeps=400), x0, torques, 400)
     assert float(jnp.max(jnp.abs(implicit[:, :2] - fine[:, :2]))) < 1e-6
 
 

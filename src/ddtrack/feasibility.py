@@ -143,35 +143,6 @@ def check_robot_limits(scenario: Any, peaks: tuple[float, float]) -> list[dict]:
     return warnings
 
 
-def check_drive(scenario: Any) -> list[dict]:
-    """Warn where a torque-level law drives a preset whose servos offer no current (torque) mode, saying how the run
-    simulates it: through PWM (``plant.motor.drive = "pwm"``, the default for such a servo, on a motor plant), as if
-    the servo controlled current, or as ideal torque sources (the ``dynamic`` and motorless plants)."""
-    from .scenario.motor_configs import motor_drive
-    from .scenario.registry import controller_output
-    from .scenario.sections import MOTOR_MODELS
-
-    robot = scenario.robot.preset_robot()
-    modes = () if robot is None or robot.motor is None else robot.motor.drive_modes
-    if not modes or "current" in modes or controller_output(scenario.controller) != "torque":
-        return []
-    offered = ", ".join(mode.replace("_", " ") for mode in modes)
-    if scenario.plant.model not in MOTOR_MODELS:
-        how = f"plant '{scenario.plant.model}' applies its torques as ideal sources"
-    elif motor_drive(scenario) == "pwm":
-        how = (
-            "this run drives them by PWM, the torque turned into a voltage through the datasheet motor's model at "
-            'the measured wheel speed (plant.motor.drive = "pwm"), as the robot\'s firmware would have to'
-        )
-    else:
-        how = 'this run simulates them as if they controlled current (plant.motor.drive = "current")'
-    message = (
-        f"the {robot.name}'s {robot.motor.name} servos offer {offered} modes, no current (torque) mode, and this "
-        f"controller commands wheel torques: {how}; a velocity-level law over cmd_vel runs on the robot as it is"
-    )
-    return [{"code": "drive_not_offered", "message": message}]
-
-
 def check_open_loop(scenario: Any) -> None:
     """Refuse an open-loop controller's plan (``[controller] kind = "replay"``, through its ``check_within``) that
     commands more than the true robot's top speed or yaw rate (``Scenario.top_speeds``): unlike a reference, no clamp
@@ -389,6 +360,5 @@ def check(scenario: Any) -> list[dict]:
         *loading,
         *check_clamps(scenario, peaks),
         *check_robot_limits(scenario, peaks),
-        *check_drive(scenario),
         *check_sampled_inner_loop(scenario),
     ]

@@ -349,3 +349,18 @@ def warning_counts(runs: list[dict]) -> dict[str, int]:
         for code in sorted({w["code"] for w in r.get("warnings") or ()}):  # records from before warnings: none
             counts[code] = counts.get(code, 0) + 1
     return counts
+
+
+def lost_path_warnings(metrics: dict) -> list[dict]:
+    """A run that ended off its path (``lost_path``): its error statistics describe a robot no longer tracking."""
+    if not metrics.get("lost_path"):
+        return []
+    from ._format import significant
+
+    message = (
+        f"the robot is off its path: e_tr stayed beyond {significant(metrics['lost_path_error'])} m "
+        f"(simulation.lost_path_error) from t = {metrics['lost_path_time']:g} s to the end of the metric window "
+        "(it lost the path, or never reached it); its error statistics measure how far off it was, not how well it "
+        "tracks, and benchmarks count it apart"
+    )
+    return [{"code": "lost_path", "message": message}]

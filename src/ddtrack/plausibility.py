@@ -42,13 +42,11 @@ def grip_used(columns: dict, friction: float, slip_speed: float) -> dict[str, np
     return {"mu_used": np.max(used, axis=0), "sliding": np.any(speeds > slip_speed, axis=0).astype(float)}
 
 
-def traction_columns(
-    params: RobotParams, columns: dict, floor: tuple[float, float] | None = None
-) -> dict[str, np.ndarray]:
+def traction_columns(params: RobotParams, columns: dict, scenario: Any = None) -> dict[str, np.ndarray]:
     """The grip a torque-driven run on the true plant ``params`` needed, and its wheel speeds ``wheel_speed_r``,
     ``wheel_speed_l`` [rad/s]; none for a velocity-input plant, whose speeds jump by command and whose contact forces
-    mean nothing. On a plant that models grip (``floor``: its friction mu and slip speed eps_s, and slips in the
-    columns) the grip its own contact forces used (:func:`grip_used`); on any other, ``mu_required``, what rolling
+    mean nothing. On a plant that models grip (``scenario``'s :func:`slip_floor`, and slips in the columns) the grip
+    its own contact forces used (:func:`grip_used`); on any other, ``mu_required``, what rolling
     without slip needed (:mod:`ddtrack.model.traction`)."""
     if "tau_r" not in columns or np.all(np.isnan(columns["tau_r"])):
         return {}
@@ -64,6 +62,7 @@ def traction_columns(
         right, left = traction.wheel_speeds(
             columns["v"], columns["omega"], wheel_radius=float(params.wheel_radius), half_axle=float(params.half_axle)
         )
+    floor = None if scenario is None else slip_floor(scenario)
     if floor is not None and "slip_r" in columns:
         return grip_used(columns, *floor) | {"wheel_speed_r": right, "wheel_speed_l": left}
     return {

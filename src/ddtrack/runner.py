@@ -21,26 +21,18 @@ import numpy as np
 from jax import Array
 
 from . import feasibility
-from ._format import significant
 from .adaptation import adaptation_warnings
 from .compilations import padded_length
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
-from .metrics import summarize, tracking_error
+from .metrics import lost_path_warnings, summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
-from .plausibility import (
-    motor_metrics,
-    motor_warnings,
-    slip_floor,
-    speed_warnings,
-    traction_columns,
-    traction_warnings,
-)
+from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
 from .precision import float64_in_this_thread
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
-from .scenario.motor_configs import motor_or_none
+from .scenario.motor_configs import check_drive, motor_or_none
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .trajectories import Trajectory
 
@@ -349,25 +341,13 @@ def run_warnings(
     ``nmse``, the emulator's identification NMSE per output, or None)."""
     return [
         *feasibility.check(scenario),
+        *check_drive(scenario),
         *lost_path_warnings(metrics),
         *traction_warnings(scenario, metrics),
         *motor_warnings(scenario, metrics),
         *speed_warnings(scenario, columns, metrics),
         *adaptation_warnings(scenario.controller, columns, None if nmse is None else [float(v) for v in nmse]),
     ]
-
-
-def lost_path_warnings(metrics: dict) -> list[dict]:
-    """A run that ended off its path (``lost_path``): its error statistics describe a robot no longer tracking."""
-    if not metrics.get("lost_path"):
-        return []
-    message = (
-        f"the robot is off its path: e_tr stayed beyond {significant(metrics['lost_path_error'])} m "
-        f"(simulation.lost_path_error) from t = {metrics['lost_path_time']:g} s to the end of the metric window "
-        "(it lost the path, or never reached it); its error statistics measure how far off it was, not how well it "
-        "tracks, and benchmarks count it apart"
-    )
-    return [{"code": "lost_path", "message": message}]
 
 
 def run_metrics(
@@ -400,7 +380,9 @@ def run_metrics(
     # a failed run's series say nothing about grip or adaptation; what loading found (e.g. an unstable sampled
     # inner loop) still holds, and names the cause
     metrics["warnings"] = (
-        run_warnings(scenario, columns, metrics, nmse) if status == "ok" else feasibility.check(scenario)
+        run_warnings(scenario, columns, metrics, nmse)
+        if status == "ok"
+        else [*feasibility.check(scenario), *check_drive(scenario)]
     )
     return metrics
 
@@ -409,7 +391,7 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
     """(columns, metrics) of a finished single run as ``ddtrack run`` writes them: the time series with the grip it
     needed (:func:`traction_columns`), and ``metrics.json`` (:func:`run_metrics`, the identification NMSE included)."""
     columns = timeseries(result)
-    columns |= traction_columns(setup.plant_params, columns, slip_floor(scenario))
+    columns |= traction_columns(setup.plant_params, columns, scenario)
     nmse = None if setup.identification is None else setup.identification.nmse
     metrics = run_metrics(scenario, columns, status=result.status_name, failure_time=result.failure_time, nmse=nmse)
     return columns, metrics
@@ -458,7 +440,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
         columns = {name: value[valid] for name, value in columns.items()}
         columns |= traction_columns(
-            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, slip_floor(scenario)
+            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, scenario
         )
         metrics.append(
             run_metrics(

@@ -116,3 +116,31 @@ def lag_plant(params: RobotParams, scenario: Any) -> LagPlant:
         )
     top = (robot.max_speed, robot.max_yaw_rate) if robot is not None else (None, None)
     return lag_plant_model(theta, *(limit if limit is not None else float("inf") for limit in top))(params)
+
+
+def check_drive(scenario: Any) -> list[dict]:
+    """Warn where a torque-level law drives a preset whose servos offer no current (torque) mode, saying how the run
+    simulates it: through PWM (``plant.motor.drive = "pwm"``, the default for such a servo, on a motor plant), as if
+    the servo controlled current, or as ideal torque sources (the ``dynamic`` and motorless plants)."""
+    from .registry import controller_output
+    from .sections import MOTOR_MODELS
+
+    robot = scenario.robot.preset_robot()
+    modes = () if robot is None or robot.motor is None else robot.motor.drive_modes
+    if not modes or "current" in modes or controller_output(scenario.controller) != "torque":
+        return []
+    offered = ", ".join(mode.replace("_", " ") for mode in modes)
+    if scenario.plant.model not in MOTOR_MODELS:
+        how = f"plant '{scenario.plant.model}' applies its torques as ideal sources"
+    elif motor_drive(scenario) == "pwm":
+        how = (
+            "this run drives them by PWM, the torque turned into a voltage through the datasheet motor's model at "
+            'the measured wheel speed (plant.motor.drive = "pwm"), as the robot\'s firmware would have to'
+        )
+    else:
+        how = 'this run simulates them as if they controlled current (plant.motor.drive = "current")'
+    message = (
+        f"the {robot.name}'s {robot.motor.name} servos offer {offered} modes, no current (torque) mode, and this "
+        f"controller commands wheel torques: {how}; a velocity-level law over cmd_vel runs on the robot as it is"
+    )
+    return [{"code": "drive_not_offered", "message": message}]
