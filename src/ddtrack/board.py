@@ -35,10 +35,16 @@ def warning_codes(metrics: Mapping[str, Any] | None) -> set[str]:
     return {w["code"] for w in (metrics or {}).get("warnings") or []}
 
 
+def lost(run: Mapping[str, Any]) -> bool:
+    """Whether a run (a flat row with ``status`` and its metrics) ran to its end off its path (``lost_path``,
+    :func:`ddtrack.metrics.lost_path_time`)."""
+    return run["status"] == "ok" and bool(run.get("lost_path"))
+
+
 def tracks(run: Mapping[str, Any]) -> bool:
     """Whether a run (a flat row with ``status`` and its metrics) tracked its reference to the end: it neither
     failed nor lost the path (``lost_path``, :func:`ddtrack.metrics.lost_path_time`)."""
-    return run["status"] == "ok" and not run.get("lost_path")
+    return run["status"] == "ok" and not lost(run)
 
 
 def tracking_value(run: Mapping[str, Any], key: str = "e_tr_mean") -> Any:
@@ -51,12 +57,12 @@ def run_statistics(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """``runs``, ``failures`` (status not ok), ``lost`` (ran to the end off the path) with ``lost_rate`` (a
     fraction with its Wilson 95 % interval), and the mean [95 % CI] of each of :data:`STATISTICS` over the runs
     that tracked (flat rows with ``status`` and the metrics), in its domain; the others count as missing."""
-    lost = sum(r["status"] == "ok" and bool(r.get("lost_path")) for r in runs)
+    off = sum(map(lost, runs))
     summary: dict[str, Any] = {
         "runs": len(runs),
         "failures": sum(r["status"] != "ok" for r in runs),
-        "lost": lost,
-        "lost_rate": rate_ci(lost, len(runs)),
+        "lost": off,
+        "lost_rate": rate_ci(off, len(runs)),
     }
     for key in STATISTICS:
         summary[key] = mean_ci([tracking_value(r, key) for r in runs], domain=METRIC_DOMAINS[key])

@@ -14,7 +14,7 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 
 from ._format import significant, with_interval
-from .board import tracking_value
+from .board import lost, tracking_value
 from .errors import ConfigError
 from .metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
 from .outdir import atomic_write
@@ -74,7 +74,7 @@ def summarise(rows: dict[str, list[dict]]) -> dict:
             key: mean_ci([tracking_value(r, key) for r in runs], domain=METRIC_DOMAINS[key]) for key in STATISTICS
         }
         summary["controllers"][name]["failures"] = sum(r["status"] != "ok" for r in runs)
-        summary["controllers"][name]["lost"] = sum(r["status"] == "ok" and bool(r.get("lost_path")) for r in runs)
+        summary["controllers"][name]["lost"] = sum(map(lost, runs))
         summary["controllers"][name]["warnings"] = warning_counts(runs)
         if name != names[0]:
             pairs = [(tracking_value(b), tracking_value(r)) for b, r in zip(baseline, runs, strict=True)]

@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow as pa
 
 from ._format import interval_text, significant
-from .board import IMPLAUSIBLE, interval_columns, tracking_value, warning_codes
+from .board import IMPLAUSIBLE, interval_columns, lost, tracking_value, warning_codes
 from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement, rate_ci
 
 
@@ -33,7 +33,7 @@ def rows(records: dict[str, dict]) -> list[dict]:
                 "seed": record["seed"],
                 "status": record["status"],
                 **{k: labels[k] for k in ("robot", "trajectory", "condition")},
-                "lost": record["status"] == "ok" and bool(metrics.get("lost_path")),
+                "lost": lost({"status": record["status"], **metrics}),
                 "e_tr_mean": tracking_value({"status": record["status"], **metrics}),
                 "implausible": bool(warning_codes(metrics) & set(IMPLAUSIBLE)),
             }
@@ -66,8 +66,8 @@ def robot_board(runs: list[dict], robot: str, entries: Sequence[str], conditions
                 "controller": label,
                 "runs": len(mine),
                 "failures": sum(r["status"] != "ok" for r in mine),
-                "lost": sum(bool(r.get("lost")) for r in mine),
-                "lost_rate": rate_ci(sum(bool(r.get("lost")) for r in mine), len(mine)),
+                "lost": (off := sum(bool(r.get("lost")) for r in mine)),
+                "lost_rate": rate_ci(off, len(mine)),
                 "implausible": sum(r["implausible"] for r in mine),
                 "all": over_seeds(mine),
                 **{c: summary for c, summary in by_condition.items() if summary["n"] + summary["missing"]},

@@ -22,7 +22,17 @@ from typing import Any
 import pyarrow as pa
 
 from ._format import interval_text, significant
-from .board import GRIP, MOTOR, STATISTICS, interval_columns, run_statistics, tracking_value, warning_codes, write_board
+from .board import (
+    GRIP,
+    MOTOR,
+    STATISTICS,
+    interval_columns,
+    lost,
+    run_statistics,
+    tracking_value,
+    warning_codes,
+    write_board,
+)
 from .errors import ConfigError
 from .metrics import pooled_improvement
 from .robot_suite import default_entries, entry_controller, entry_labels, suite_entry
@@ -254,7 +264,7 @@ def leaderboard(records: Mapping[str, dict], entries: Sequence[BenchEntry]) -> l
 
 def _outcome(row: dict) -> str:
     """``ok``, ``lost`` (ran to the end off the path) or the failure's status."""
-    return "lost" if row["status"] == "ok" and row.get("lost_path") else row["status"]
+    return "lost" if lost(row) else row["status"]
 
 
 def board_markdown(board: Sequence[dict], reference: str) -> str:
