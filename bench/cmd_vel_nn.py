@@ -1,9 +1,9 @@
 """The paper's NN-adaptive law over cmd_vel on a TurtleBot3 Burger (docs/benchmarks.md).
 
 Runs ``scenarios/burger_cmd_vel_figure8.toml`` for kinematic backstepping, backstepping with ``inner = "none"`` and
-the NN-adaptive law with ``inner = "none"`` on common seeds, with the scenario's latency and odometry and without
-them, and prints each one's mean e_tr over the metric window per seed, the identification's NMSE and how the
-NN-adaptive gains moved::
+the NN-adaptive law with ``inner = "none"`` on common seeds, with the scenario's latency and odometry (heading from
+the gyro, as shipped, and from the wheels) and without them, and prints each one's mean e_tr over the metric window
+per seed, the identification's NMSE and how the NN-adaptive gains moved::
 
     python bench/cmd_vel_nn.py            # --seeds 5
 """
@@ -23,6 +23,7 @@ from ddtrack.runner import batch_metrics, prepare_batch, run_setup
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "burger_cmd_vel_figure8.toml"
 CASES = {
     "latency and odometry": [],
+    "latency and odometry turning by the wheels": ["sensing.heading=encoders"],
     "neither": ["sensing.actuation_delay=0", "sensing.odometry=false", "sensing.encoder_counts=0"],
 }
 CONTROLLERS = {

@@ -37,7 +37,8 @@ def test_every_preset_builds_a_valid_robot(name):
 @pytest.mark.parametrize("name", sorted(robots.PRESETS))
 def test_every_number_has_a_source_or_a_reason(name):
     p = robots.preset(name)
-    fields = [*p.params, "wheel_inertia", "caster_position", "max_speed", "max_yaw_rate", "motor", "lag", "input"]
+    fields = list(p.values())
+    assert {*p.params, "wheel_inertia", "max_speed", "motor", "lag", "odometry_heading"} <= set(fields)
     missing = [f for f in fields if not (p.sources.get(f) or p.assumptions.get(f))]
     assert missing == []
     assert set(p.sources) | set(p.assumptions) <= set(fields)  # no note on a field that does not exist

@@ -163,20 +163,24 @@ def test_a_viewer_gets_the_robot_its_frames_and_the_one_shot_topics_latched(run_
     assert not truth.pose.covariance.any() and not truth.twist.covariance.any()  # the true state is exact
 
 
-def test_the_estimates_covariances_are_the_encoders_quantisation_carried_along_the_run(bag, columns):
+def test_the_estimates_covariances_are_the_encoders_and_the_gyros_errors_carried_along_the_run(bag, columns):
+    """The Burger's odometry drives by its encoders and turns by its gyro (the preset's use_imu)."""
+    from ddtrack.robots import OPENCR_MPU9250
+
     with AnyReader([bag], default_typestore=typestore()) as reader:
         topic = [c for c in reader.connections if c.topic == "/odom_estimate"]
         estimates = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=topic)]
     pose = np.array([m.pose.covariance for m in estimates]).reshape(-1, 6, 6)
     twist_ = np.array([m.twist.covariance for m in estimates]).reshape(-1, 6, 6)
-    count = 2 * np.pi / 4096  # the Burger's XL430 count [rad]
+    count, period = 2 * np.pi / 4096, 0.05  # the Burger's XL430 count [rad], its control period [s]
     radius = 0.03333  # the odometry's nominal R-hat (the scenario's worn tyre), the one its estimate uses
-    speed = radius * count / np.sqrt(12) / 0.05  # std of R-hat (e0 - e1 + e0' - e1') / 2 / T_c
+    speed = radius * count / np.sqrt(12) / period  # std of R-hat (e0 - e1 + e0' - e1') / 2 / T_c
+    density = OPENCR_MPU9250.noise_density
     assert np.sqrt(twist_[:, 0, 0]) == pytest.approx(np.full(len(columns["t"]), speed), rel=1e-12)
-    assert np.sqrt(twist_[:, 5, 5]) == pytest.approx(np.full(len(columns["t"]), speed / 0.08), rel=1e-12)
-    # the heading's error is the first and last readings' (the increments telescope): R / (2 L) 2 q / sqrt(12)
-    heading = radius / 0.16 * 2 * count / np.sqrt(12)
-    assert np.sqrt(pose[1:, 5, 5]) == pytest.approx(np.full(len(columns["t"]) - 1, heading), rel=1e-9)
+    assert np.sqrt(twist_[:, 5, 5]) == pytest.approx(np.full(len(columns["t"]), density / np.sqrt(period)), rel=1e-12)
+    # the heading's error is the gyro's random walk, N^2 T_c per period, whatever the encoders read
+    periods = np.arange(len(columns["t"]))
+    assert pose[:, 5, 5] == pytest.approx(density**2 * period * periods, rel=1e-9, abs=1e-30)
     assert not pose[0].any() and np.all(np.diff(pose[1:, 0, 0] + pose[1:, 1, 1]) >= -1e-20)  # position drifts
     assert np.allclose(pose, np.swapaxes(pose, 1, 2)) and np.all(np.linalg.eigvalsh(pose[-1]) >= -1e-20)
 

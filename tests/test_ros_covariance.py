@@ -20,9 +20,12 @@ def arc(pose: np.ndarray, right: np.ndarray, left: np.ndarray) -> np.ndarray:
     return np.stack([pose[:, 0] + chord * np.cos(middle), pose[:, 1] + chord * np.sin(middle), pose[:, 2] + turn], 1)
 
 
-def monte_carlo(fix_every: int = 0, gain: float = 0.0, position_std: float = 0.0, heading_std: float = 0.0):
+def monte_carlo(
+    fix_every: int = 0, gain: float = 0.0, position_std: float = 0.0, heading_std: float = 0.0, gyro: float = 0.0
+):
     """True and estimated poses (STEPS + 1, RUNS, 3) of a robot on a varying arc, each run's encoders zeroed at a
-    random angle and its wheel speeds jittered by 1 % per period (so successive count remainders differ)."""
+    random angle and its wheel speeds jittered by 1 % per period (so successive count remainders differ); with
+    ``gyro`` > 0 the estimate turns by the true turn plus white rate noise of that density [rad/s/sqrt(Hz)]."""
     rng = np.random.default_rng(7)
     t = np.arange(STEPS) * PERIOD
     speeds = np.stack([6.0 + 2.0 * np.sin(0.4 * t), 5.0 + 0.0 * t])  # wheel rates [rad/s], right and left
@@ -36,6 +39,11 @@ def monte_carlo(fix_every: int = 0, gain: float = 0.0, position_std: float = 0.0
         true_step, read_step = np.diff(angles[:, k : k + 2], axis=1)[:, 0], np.diff(read[:, k : k + 2], axis=1)[:, 0]
         truth.append(arc(truth[-1], *true_step))
         seen = arc(estimate[-1], *read_step)
+        if gyro:  # the encoders' distance along the gyro's turn
+            distance = RADIUS * (read_step[0] + read_step[1]) / 2
+            turn = truth[-1][:, 2] - truth[-2][:, 2] + gyro * np.sqrt(PERIOD) * rng.standard_normal(RUNS)
+            chord, middle = distance * np.sinc(turn / 2 / np.pi), estimate[-1][:, 2] + turn / 2
+            seen = estimate[-1] + np.stack([chord * np.cos(middle), chord * np.sin(middle), turn], 1)
         if fix_every and (k + 1) % fix_every == 0:
             noise = rng.standard_normal((RUNS, 3)) * [position_std, position_std, heading_std]
             seen = seen + gain * (truth[-1] + noise - seen)
@@ -57,8 +65,12 @@ def predicted(truth: np.ndarray, **fix) -> np.ndarray:
 
 @pytest.mark.parametrize(
     "fix",
-    [{}, {"fix_periods": 20, "fix_gain": 0.5, "fix_position_std": 2e-4, "fix_heading_std": 1e-4}],
-    ids=["encoders", "encoders and a fix"],
+    [
+        {},
+        {"fix_periods": 20, "fix_gain": 0.5, "fix_position_std": 2e-4, "fix_heading_std": 1e-4},
+        {"gyro_noise_density": 1.7e-4},  # the TurtleBot3's MPU-9250: 0.01 deg/s/sqrt(Hz)
+    ],
+    ids=["encoders", "encoders and a fix", "encoders and a gyro"],
 )
 def test_the_covariance_is_the_spread_of_quantised_odometry(fix):
     truth, estimate = monte_carlo(
@@ -66,6 +78,7 @@ def test_the_covariance_is_the_spread_of_quantised_odometry(fix):
         fix.get("fix_gain", 0.0),
         fix.get("fix_position_std", 0.0),
         fix.get("fix_heading_std", 0.0),
+        fix.get("gyro_noise_density", 0.0),
     )
     error = estimate - truth
     model = predicted(truth, **fix)

@@ -153,8 +153,44 @@ def test_an_absolute_fix_pulls_the_estimate_back_to_the_truth():
     ex = np.asarray(run(chain.wrap(KinematicPlant(), nominal, PARAMS), straight).logs["odom_ex"])
     np.testing.assert_allclose(ex[::10], 0.0, atol=1e-12)
     np.testing.assert_allclose(ex[9::10], 0.01 * 0.5 * 9 * T, rtol=1e-9)  # 9 periods of drift since the last fix
-    with pytest.raises(ValueError, match="needs odometry"):
+    with pytest.raises(ValueError, match="need odometry"):
         Sensing(control_period=T, fix_period=10 * T).wrap(KinematicPlant(), nominal, PARAMS)
+
+
+def gyro_run(nominal: RobotParams, density: float, bias: float, key=None):
+    """The unicycle turning at a constant 2 rad/s, its odometry's heading from a gyro (one compilation for all)."""
+    chain = Sensing(odometry=True, control_period=T, gyro=True, gyro_noise_density=density, gyro_bias=bias)
+    turning = OpenLoopVelocity(offset=(0.3, 2.0), swing=(0.0, 0.0))
+    return run(chain.wrap(KinematicPlant(), nominal, PARAMS, key), turning)
+
+
+def test_a_gyro_heading_ignores_the_wheels_and_drifts_by_its_bias():
+    """With R-hat 1 % too large the encoders' heading gains 1 % of every turn; a gyro's stays exact (no noise, no
+    bias), or drifts by exactly bias t, and its yaw rate reads omega + bias. The distance still comes from the
+    encoders: 1 % too long either way."""
+    nominal = RobotParams(wheel_radius=1.01 * PARAMS.wheel_radius)
+    wheels = odometry_run(0, nominal, (0.3, 2.0))
+    theta = np.asarray(wheels.state[:, 2])
+    np.testing.assert_allclose(wheels.logs["odom_etheta"], 0.01 * theta, rtol=1e-9, atol=1e-15)
+    exact = gyro_run(nominal, 0.0, 0.0)
+    np.testing.assert_allclose(exact.logs["odom_etheta"], 0.0, atol=1e-12)
+    assert theta[-1] > 3.5  # past pi: the turn of each period is taken the short way round
+    bias = 1e-3
+    biased = gyro_run(nominal, 0.0, bias)
+    np.testing.assert_allclose(biased.logs["odom_etheta"], bias * T * np.arange(len(theta)), atol=1e-12)
+    np.testing.assert_allclose(biased.plant_state["odom_omega"][1:], 2.0 + bias, rtol=1e-9)
+    np.testing.assert_allclose(biased.plant_state["odom_v"][1:], 1.01 * 0.3, rtol=1e-9)
+
+
+def test_a_noisy_gyro_heading_walks_randomly_with_its_density():
+    """White rate noise of density N integrates to a heading error of variance N^2 t, each seed its own walk."""
+    density, runs = 0.05, 300
+    keys = jax.random.split(jax.random.PRNGKey(11), runs)
+    final = np.array([float(gyro_run(PARAMS, density, 0.0, key).logs["odom_etheta"][-1]) for key in keys])
+    elapsed = T * (N - 1)
+    assert np.var(final) == pytest.approx(density**2 * elapsed, rel=0.25)  # 300 runs: the variance to 8 %
+    assert abs(np.mean(final)) < 4 * density * math.sqrt(elapsed / runs)
+    assert len(set(final.tolist())) == runs
 
 
 @pytest.mark.slow
@@ -269,11 +305,37 @@ def test_bad_sensing_keys_are_refused_naming_the_field(cli, tmp_path, override, 
     assert code == 2 and field in err
 
 
-@pytest.mark.parametrize("override", ["sensing.encoder_counts=1024", "sensing.fix_period=1"])
+@pytest.mark.parametrize("override", ["sensing.encoder_counts=1024", "sensing.fix_period=1", "sensing.heading=gyro"])
 def test_encoders_or_a_fix_without_odometry_are_refused(override):
     with pytest.raises(ConfigError) as refused:
         ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=[override])
     assert refused.value.field == override.split("=")[0] and "odometry" in refused.value.suggestion
+
+
+def test_odometry_turns_as_the_robot_s_own_does_and_a_gyro_without_numbers_is_refused(cli):
+    """A TurtleBot3 preset's odometry takes its heading from the OpenCR's gyro (use_imu), with the datasheet's noise;
+    ``sensing.heading`` overrides it; a gyro on a robot with no preset gyro must be given its numbers."""
+    from ddtrack.robots import OPENCR_MPU9250
+
+    chain = build(ddtrack.load_scenario(BURGER)).sensing
+    assert chain.gyro and (chain.gyro_noise_density, chain.gyro_bias) == (
+        OPENCR_MPU9250.noise_density,
+        OPENCR_MPU9250.bias,
+    )
+    assert not build(ddtrack.load_scenario(BURGER, overrides=["sensing.heading=encoders"])).sensing.gyro
+    given = ["sensing.gyro_noise_density=0.001", "sensing.gyro_bias=-0.002"]
+    chain = build(ddtrack.load_scenario(BURGER, overrides=given)).sensing
+    assert (chain.gyro_noise_density, chain.gyro_bias) == (0.001, -0.002)
+    line = ["sensing.odometry=true", "sensing.heading=gyro"]
+    with pytest.raises(ConfigError) as refused:
+        ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=line)
+    assert refused.value.field == "sensing.gyro_noise_density" and "0 for an ideal gyro" in refused.value.suggestion
+    code, _, err = cli("validate", SCENARIOS / "paper_line.toml", *(a for o in line for a in ("--set", o)))
+    assert code == 2 and "sensing.gyro_noise_density" in err and "Traceback" not in err
+    ideal = ddtrack.load_scenario(
+        SCENARIOS / "paper_line.toml", overrides=[*line, "sensing.gyro_noise_density=0", "sensing.gyro_bias=0"]
+    )
+    assert build(ideal).sensing.gyro
 
 
 @pytest.mark.slow

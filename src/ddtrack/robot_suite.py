@@ -152,9 +152,11 @@ def condition_overrides(robot: Robot, condition: str) -> list[str] | None:
         return ["plant.floor_friction=0.4"] if robot.floor else None
     if condition == "odometry":
         counts = [f"sensing.encoder_counts={preset.motor.encoder_counts}"] if preset.motor is not None else []
+        heading = "gyro" if preset.gyro is not None else "encoders"  # as the robot's own odometry turns
         radius = preset.params["wheel_radius"]
         return [
             "sensing.odometry=true",
+            f"sensing.heading={heading}",
             *counts,
             f"robot.wheel_radius={radius * ODOMETRY_RADIUS_ERROR!r}",
             f"plant.wheel_radius={radius!r}",

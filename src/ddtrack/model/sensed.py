@@ -4,7 +4,7 @@ The wrapper is itself a plant (``init``/``saturate``/``advance``/``observe``/``l
 and the Gymnasium environment step it like any other. Its state is the inner plant's, then what the sensing chain
 carries from one period to the next::
 
-    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed readings | fix_clock]
+    [inner state | phi_r, phi_l, odom_x .. odom_omega (odometry) | queued commands | delayed readings | sensing_clock]
 
 (each part only when its feature is on; the wheel angles also not when the inner plant has its own ``phi_r``,
 ``phi_l``).
@@ -13,7 +13,9 @@ carries from one period to the next::
 ``measure(x)`` is what the controller's sensors report: the odometry estimate (or the true body without odometry),
 as it was ``measurement_periods`` periods ago. The queues are internal: ``recorded_layout`` names the states a run
 records (the inner plant's, the wheel angles and the estimate), so a long delay does not flood the time series.
-An optional absolute fix blends a noisy true pose into the estimate every ``fix_periods`` periods.
+An optional absolute fix blends a noisy true pose into the estimate every ``fix_periods`` periods; optionally the
+estimate's heading comes from a gyro (the true turn of each period with white rate noise and a constant bias added)
+instead of the wheels' difference, as a TurtleBot3 does with ``use_imu``.
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ from .sensing import encoder_angle, odometry_step, split_delay
 WHEEL_ANGLES = Layout(("phi_r", "phi_l"), ("rad", "rad"))
 #: the odometry estimate, a BODY vector
 ODOMETRY = Layout(tuple(f"odom_{name}" for name in BODY.names), BODY.units)
-#: periods since the start: when the absolute fix is due, and which draw it takes
-FIX_CLOCK = Layout(("fix_clock",), ("",))
+#: periods since the start: when the absolute fix is due, and which draws the fix and the gyro take
+CLOCK = Layout(("sensing_clock",), ("",))
+GYRO_STREAM = 1  #: the gyro's draws: the period's key folded once more (the fix's draws use the period's key itself)
 #: estimated minus true pose, logged each period
 ODOMETRY_ERROR = Layout(("odom_ex", "odom_ey", "odom_etheta"), ("m", "m", "rad"))
 
@@ -72,11 +75,17 @@ class SensedPlant:
         counts per wheel revolution; 0: the encoders read the exact angle
     odometry
         the controller sees the odometry estimate instead of the true body (static)
-    fix_gain, fix_position_std, fix_heading_std, fix_key
-        the absolute fix's blend weight in (0, 1], its noise on x and y [m] and on theta [rad], and the PRNG key
-        its noise is drawn from (per period, folded in by the period's index)
+    fix_gain, fix_position_std, fix_heading_std
+        the absolute fix's blend weight in (0, 1], its noise on x and y [m] and on theta [rad]
+    gyro_noise_density, gyro_bias
+        with ``gyro``: the gyro's white rate noise [rad/s/sqrt(Hz)] (a turn over T_c has the standard deviation
+        density sqrt(T_c)) and its constant bias [rad/s]
+    noise_key
+        the PRNG key the fix's and the gyro's noise are drawn from (per period, folded in by the period's index)
     fix_periods
         an absolute fix every this many periods; 0: none (static)
+    gyro
+        odometry takes each period's turn from the gyro instead of the encoders (static)
     """
 
     inner: Any
@@ -88,12 +97,15 @@ class SensedPlant:
     fix_gain: Array | float = 0.0
     fix_position_std: Array | float = 0.0
     fix_heading_std: Array | float = 0.0
-    fix_key: Array | None = None
+    gyro_noise_density: Array | float = 0.0
+    gyro_bias: Array | float = 0.0
+    noise_key: Array | None = None
     command_periods: int = static_field(default=0)
     command_fraction: float = static_field(default=0.0)
     measurement_periods: int = static_field(default=0)
     odometry: bool = static_field(default=False)
     fix_periods: int = static_field(default=0)
+    gyro: bool = static_field(default=False)
 
     # --- layouts ------------------------------------------------------------------------------------------------
 
@@ -101,6 +113,11 @@ class SensedPlant:
     def queue_length(self) -> int:
         """Commands waiting: k, and one more when a fraction of a period splits it (the command that acts first)."""
         return self.command_periods + (1 if self.command_fraction > 0.0 else 0)
+
+    @property
+    def clocked(self) -> bool:
+        """The state counts periods (:data:`CLOCK`): the fix's schedule and the fix's and the gyro's draws need it."""
+        return bool(self.fix_periods) or (self.odometry and self.gyro)
 
     @property
     def own_angles(self) -> bool:
@@ -116,7 +133,7 @@ class SensedPlant:
             *odometry,
             _queue_layout("queued", self.inner.input_layout, self.queue_length),
             _queue_layout("delayed", BODY, self.measurement_periods),
-            FIX_CLOCK if self.fix_periods else none,
+            CLOCK if self.clocked else none,
         )
 
     @property
@@ -172,7 +189,7 @@ class SensedPlant:
         first = body if self.odometry else self.inner.observe(inner)
         queued = jnp.tile(held, self.queue_length)
         delayed = jnp.tile(first, self.measurement_periods)
-        clock = jnp.zeros(1 if self.fix_periods else 0)  # periods since the start, for the fix's schedule and draws
+        clock = jnp.zeros(1 if self.clocked else 0)  # periods since the start, for the fix's schedule and the draws
         return jnp.concatenate([inner, *odometry, queued, delayed, clock])
 
     def saturate(self, u: Array) -> Array:
@@ -221,31 +238,45 @@ class SensedPlant:
             if self.own_angles:
                 phi_next = self._inner_angles(inner_next)
             increments = self._encoder(phi_next) - self._encoder(phi)
+            turn = None
+            if self.gyro:  # the true turn of the period, as the gyro integrates it, with its noise and bias
+                true_turn = self.inner.observe(inner_next)[2] - self.inner.observe(inner)[2]
+                true_turn = jnp.arctan2(jnp.sin(true_turn), jnp.cos(true_turn))  # a period turns less than pi
+                turn = self.gyro_turn(true_turn, period, x[-1] + 1.0)
             estimate = odometry_step(
                 estimate,
                 increments,
                 wheel_radius=self.nominal_radius,
                 half_axle=self.nominal_half_axle,
                 period=period,
+                turn=turn,
             )
             if self.fix_periods:
                 estimate = self.fixed(estimate, self.inner.observe(inner_next), x[-1] + 1.0)
             parts += [estimate] if self.own_angles else [phi_next, estimate]
         if self.measurement_periods:
             delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
-        tail = [x[-1:] + 1.0] if self.fix_periods else []
+        tail = [x[-1:] + 1.0] if self.clocked else []
         return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1), *tail])
 
     def fixed(self, estimate: Array, body: Array, clock: Array) -> Array:
         """The estimate after the absolute fix of period ``clock`` (a localisation of the true ``body``, noise
         added), blended in with ``fix_gain`` when the period is due: pose + g (fix - pose), the heading gap wrapped."""
-        assert self.fix_key is not None, "a fix needs its key (Sensing.wrap gives it)"
-        xi = jax.random.normal(jax.random.fold_in(self.fix_key, clock.astype(jnp.int32)), (3,))
+        assert self.noise_key is not None, "a fix needs its key (Sensing.wrap gives it)"
+        xi = jax.random.normal(jax.random.fold_in(self.noise_key, clock.astype(jnp.int32)), (3,))
         noise = jnp.stack([self.fix_position_std * xi[0], self.fix_position_std * xi[1], self.fix_heading_std * xi[2]])
         gap = body[:3] + noise - estimate[:3]
         gap = gap.at[2].set(jnp.arctan2(jnp.sin(gap[2]), jnp.cos(gap[2])))  # the short way round
         due = jnp.mod(clock, self.fix_periods) == 0
         return estimate.at[:3].add(jnp.where(due, self.fix_gain, 0.0) * gap)
+
+    def gyro_turn(self, true_turn: Array, period: Array | float, clock: Array) -> Array:
+        """The turn [rad] the gyro reports over period ``clock`` of length T_c: the true turn, plus bias T_c, plus
+        white rate noise integrated over the period, density sqrt(T_c) xi with xi standard normal."""
+        assert self.noise_key is not None, "a gyro needs its key (Sensing.wrap gives it)"
+        key = jax.random.fold_in(jax.random.fold_in(self.noise_key, clock.astype(jnp.int32)), GYRO_STREAM)
+        noise = self.gyro_noise_density * jnp.sqrt(period) * jax.random.normal(key, ())
+        return true_turn + self.gyro_bias * period + noise
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """The inner plant's channels under the command acting at the period's start, and, with odometry, the
@@ -326,6 +357,8 @@ class Sensing:
     fix_period, fix_gain, fix_position_std, fix_heading_std
         an absolute fix every ``fix_period`` [s] (a whole number of periods; 0: none), blended in with weight
         ``fix_gain``, with noise of these standard deviations [m], [rad]
+    gyro, gyro_noise_density, gyro_bias
+        odometry's heading from a gyro of this white rate noise [rad/s/sqrt(Hz)] and constant bias [rad/s]
     """
 
     actuation_delay: float = 0.0
@@ -337,18 +370,23 @@ class Sensing:
     fix_gain: float = 0.5
     fix_position_std: float = 0.0
     fix_heading_std: float = 0.0
+    gyro: bool = False
+    gyro_noise_density: float = 0.0
+    gyro_bias: float = 0.0
 
     def wrap(self, plant: Any, nominal: Any, true: Any, key: Array | None = None) -> SensedPlant:
         """``plant`` behind this chain; ``nominal`` and ``true`` are the controller's and the plant's
         :class:`~ddtrack.model.RobotParams` (``true`` may carry a batch axis, which the nominal values take);
-        ``key``, the PRNG key of the absolute fix's noise (default a fixed one), with that batch axis too."""
+        ``key``, the PRNG key of the absolute fix's and the gyro's noise (default a fixed one), with that batch axis
+        too."""
         whole, fraction = split_delay(self.actuation_delay, self.control_period)
         measured, _ = split_delay(self.measurement_delay, self.control_period)
         fixes, _ = split_delay(self.fix_period, self.control_period)
-        if fixes and not self.odometry:
-            raise ValueError("an absolute fix corrects the odometry estimate: it needs odometry")
+        if (fixes or self.gyro) and not self.odometry:
+            raise ValueError("an absolute fix and a gyro heading feed the odometry estimate: they need odometry")
         batch = jnp.shape(true.wheel_radius)
-        if fixes and key is None:
+        drawn = bool(fixes) or self.gyro
+        if drawn and key is None:
             key = jnp.broadcast_to(jax.random.PRNGKey(0), (*batch, 2))
 
         def like_batch(value: float) -> Array:
@@ -364,10 +402,13 @@ class Sensing:
             like_batch(self.fix_gain),
             like_batch(self.fix_position_std),
             like_batch(self.fix_heading_std),
-            key if fixes else None,
+            like_batch(self.gyro_noise_density),
+            like_batch(self.gyro_bias),
+            key if drawn else None,
             command_periods=whole,
             command_fraction=fraction,
             measurement_periods=measured,
             odometry=self.odometry,
             fix_periods=fixes,
+            gyro=self.gyro,
         )

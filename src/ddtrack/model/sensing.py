@@ -11,7 +11,8 @@ per control period and carry its state:
 * an **encoder** with n counts per revolution reads floor(phi n / 2 pi) 2 pi / n (:func:`encoder_counts`,
   :func:`encoder_angle`);
 * **odometry** integrates the increments of the two wheel angles over a period as the exact arc they imply with
-  the nominal wheel radius and half axle (:func:`odometry_step`), and estimates the speeds as increment / T_c.
+  the nominal wheel radius and half axle (:func:`odometry_step`), or with a gyro's turn in place of the wheels'
+  difference, and estimates the speeds as increment / T_c.
 """
 
 from __future__ import annotations
@@ -173,6 +174,7 @@ def odometry_step(
     wheel_radius: Array | float,
     half_axle: Array | float,
     period: Array | float,
+    turn: Array | None = None,
 ) -> Array:
     """The odometry estimate one control period later, as a BODY vector [x, y, theta, v, omega].
 
@@ -186,6 +188,9 @@ def odometry_step(
         the controller's nominal R-hat, L-hat [m]
     period
         T_c [s]
+    turn
+        the period's turn [rad] from another sensor (a gyro), used instead of the encoders' R (dphi_R - dphi_L) / 2L;
+        None: the encoders'
 
     Returns
     -------
@@ -193,6 +198,7 @@ def odometry_step(
         (5,) the pose at the end of the arc the increments imply (exact for constant speeds), and the speeds
         estimated as increment / T_c: (distance / T_c, turn / T_c)
     """
-    distance, turn = body_increments(increments, wheel_radius, half_axle)
+    distance, wheel_turn = body_increments(increments, wheel_radius, half_axle)
+    turn = wheel_turn if turn is None else turn
     pose = arc_pose(estimate[:3], distance, turn)
     return jnp.concatenate([pose, jnp.stack([distance / period, turn / period])])

@@ -13,13 +13,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from ..errors import ConfigError, did_you_mean
-from .datasheets import GRAVITY, InputKind, MotorDatasheet, RobotPreset, UrdfLink, composite_body, markdown_table, rpm
+from .datasheets import (
+    GRAVITY,
+    GyroDatasheet,
+    InputKind,
+    MotorDatasheet,
+    RobotPreset,
+    UrdfLink,
+    composite_body,
+    markdown_table,
+    rpm,
+)
 from .paper import PAPER
 from .pioneer import PIONEER_3DX, PIONEER_3DX_THETA
 from .turtlebot3 import (
     BAM_ARMATURE_MX64,
     BAM_ARMATURE_XL330,
     BURGER_LINKS,
+    OPENCR_MPU9250,
     TURTLEBOT3_BURGER,
     TURTLEBOT3_WAFFLE_PI,
     TURTLEBOT3_WHEEL_SPIN_INERTIA,
@@ -33,6 +44,7 @@ __all__ = [
     "BAM_ARMATURE_XL330",
     "BURGER_LINKS",
     "GRAVITY",
+    "OPENCR_MPU9250",
     "PAPER",
     "PIONEER_3DX",
     "PIONEER_3DX_THETA",
@@ -43,6 +55,7 @@ __all__ = [
     "WAFFLE_PI_LINKS",
     "XL430_W250",
     "XM430_W210",
+    "GyroDatasheet",
     "InputKind",
     "MotorDatasheet",
     "RobotPreset",

@@ -66,6 +66,31 @@ class MotorDatasheet:
 
 
 @dataclass(frozen=True)
+class GyroDatasheet:
+    """The yaw-rate gyro a robot's stock odometry takes its heading from (ROS's ``use_imu``).
+
+    Attributes
+    ----------
+    name : str
+        The IMU's model name.
+    noise_density : float
+        White rate noise [rad/s/sqrt(Hz)], the datasheet's rate noise spectral density.
+    bias : float
+        Constant rate bias left in a run [rad/s] (after whatever calibration the robot does at start).
+    source : str
+        Where ``noise_density`` comes from.
+    bias_why : str
+        Where ``bias`` comes from, or why that value.
+    """
+
+    name: str
+    noise_density: float
+    bias: float
+    source: str
+    bias_why: str
+
+
+@dataclass(frozen=True)
 class UrdfLink:
     """One URDF link as far as yaw matters: name, mass [kg], centre of mass (x, y) [m] in the base frame (axle
     midpoint at the origin, x forward) and yaw inertia about its own centre of mass [kg m^2] (0: a point mass)."""
@@ -133,6 +158,8 @@ class RobotPreset:
         The maker's top speed [m/s] and yaw rate [rad/s] whatever the motors' voltage (the firmware's limits);
         None: ``max_speed`` and ``max_yaw_rate`` are the maker's. A scenario's top speeds are these and the
         motors' no-load speed at its supply voltage (``Scenario.top_speeds``).
+    gyro : GyroDatasheet or None
+        The gyro the robot's stock odometry takes its heading from; None: its odometry turns with the wheels.
     """
 
     name: str
@@ -148,6 +175,7 @@ class RobotPreset:
     sources: Mapping[str, str]
     assumptions: Mapping[str, str]
     rated_limits: tuple[float, float] | None = None
+    gyro: GyroDatasheet | None = None
 
     @property
     def rated_speed(self) -> float | None:
@@ -168,6 +196,23 @@ class RobotPreset:
         names = {f.name for f in dataclasses.fields(RobotParams)}
         extra = {"wheel_inertia": self.wheel_inertia}
         return RobotParams(**{k: v for k, v in {**self.params, **extra}.items() if k in names})
+
+    def values(self) -> dict[str, object]:
+        """Every number and choice of the preset by name, as :attr:`sources` and :attr:`assumptions` name them."""
+        values: dict[str, object] = dict(self.params)
+        values |= {
+            "wheel_inertia": self.wheel_inertia,
+            "caster_position": self.caster_position,
+            "max_speed": self.max_speed,
+            "max_yaw_rate": self.max_yaw_rate,
+            "motor": self.motor.name if self.motor else None,
+            "lag": self.lag,
+            "input": self.input,
+            "odometry_heading": "gyro" if self.gyro else "encoders",
+        }
+        if self.gyro is not None:
+            values |= {"gyro_noise_density": self.gyro.noise_density, "gyro_bias": self.gyro.bias}
+        return values
 
     def wheel_load(self) -> float:
         """Static normal load on each drive wheel [N]: m g (1 - d / l_c) / 2, or m g / 2 without a caster position."""
@@ -198,18 +243,8 @@ def markdown_table(preset: RobotPreset) -> str:
     str
         The table, one row per field.
     """
-    values: dict[str, object] = dict(preset.params)
-    values |= {
-        "wheel_inertia": preset.wheel_inertia,
-        "caster_position": preset.caster_position,
-        "max_speed": preset.max_speed,
-        "max_yaw_rate": preset.max_yaw_rate,
-        "motor": preset.motor.name if preset.motor else None,
-        "lag": preset.lag,
-        "input": preset.input,
-    }
     rows = ["| field | value | source, or why |", "|---|---|---|"]
-    for name, value in values.items():
+    for name, value in preset.values().items():
         shown = f"{value:.6g}" if isinstance(value, float) else "none" if value is None else str(value)
         note = preset.sources.get(name, "")
         if name in preset.assumptions:

@@ -56,6 +56,8 @@ PIONEER_3DX = RobotPreset(
         "input": _MARTINS + " (the model takes velocity commands)",
     },
     assumptions={
+        "odometry_heading": "the wheel encoders, as ARIA's odometry computes it; the optional gyro accessory is not "
+        "modelled",
         "inertia": "assumed: a uniform 455 mm x 381 mm plate, m (a^2 + b^2) / 12; no measured value is published",
         "com_offset": "assumed 0 (not published); the identified lag model absorbs the body's dynamics",
         "wheel_radius": "derived: the 19 cm wheel diameter / 2",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .datasheets import MotorDatasheet, RobotPreset, UrdfLink, composite_body, rpm
+from .datasheets import GyroDatasheet, MotorDatasheet, RobotPreset, UrdfLink, composite_body, rpm
 
 _TURTLEBOT3_PAGE = "ROBOTIS e-Manual, TurtleBot3 specifications (https://emanual.robotis.com/docs/en/platform/turtlebot3/specifications/)"
 _DXL = "ROBOTIS e-Manual, TurtleBot3 appendix DYNAMIXEL (https://emanual.robotis.com/docs/en/platform/turtlebot3/appendix_dynamixel/)"
@@ -31,6 +31,26 @@ XM430_W210 = MotorDatasheet(
     "Modes; " + _DXL,
     ("current", "velocity", "position", "extended_position", "current_based_position", "pwm"),
 )  # fmt: skip
+
+# The OpenCR board's IMU, whose yaw the stock odometry takes as its heading (use_imu: true in the bringup
+# parameters; turtlebot3_node's odometry then turns by the IMU yaw's change and drives by the wheels' mean)
+_ODOMETRY_USE_IMU = (
+    "ROBOTIS-GIT/turtlebot3, turtlebot3_bringup/param/humble/{}.yaml (diff_drive_controller odometry.use_imu: "
+    "true) and turtlebot3_node/src/odometry.cpp (delta_theta from the IMU's yaw)"
+)
+_GYRO_DENSITY = math.radians(0.01)  # 0.01 deg/s/sqrt(Hz)
+_GYRO_CALIBRATION = 0.5  # [s] at rest averaged at power-up (assumed)
+OPENCR_MPU9250 = GyroDatasheet(
+    "InvenSense MPU-9250 on the OpenCR 1.0",
+    _GYRO_DENSITY,
+    _GYRO_DENSITY / math.sqrt(_GYRO_CALIBRATION),
+    "InvenSense MPU-9250 Product Specification PS-MPU-9250A-01, gyroscope rate noise spectral density "
+    "0.01 deg/s/sqrt(Hz); the IMU per the ROBOTIS OpenCR page (http://support.robotis.com/en/product/controller/"
+    "opencr.htm, sensor: 9-axis InvenSense MPU9250)",
+    "assumed: one standard deviation of what averaging the gyro at rest for 0.5 s leaves (the OpenCR firmware "
+    "calibrates the gyro's offset at power-up; its averaging time is taken, not measured), density / sqrt(0.5 s) "
+    f"= {_GYRO_DENSITY / math.sqrt(_GYRO_CALIBRATION):.3g} rad/s; drift with temperature is not modelled",
+)
 
 # The URDF links, as far as yaw matters. A wheel joint is rotated -1.57 rad about x, so the wheel link's y axis is
 # the vertical: its yaw inertia is the URDF's iyy. The caster and laser links are point masses: their URDF inertia
@@ -90,6 +110,7 @@ def _turtlebot3(
         max_speed=min(spec_speed, top_speed),
         max_yaw_rate=min(spec_yaw_rate, top_speed / half_axle),
         rated_limits=(spec_speed, spec_yaw_rate),
+        gyro=OPENCR_MPU9250,
         motor=motor,
         lag=None,
         input="velocity",
@@ -107,6 +128,8 @@ def _turtlebot3(
             "motor": motor.source,
             "input": "ROBOTIS-GIT/turtlebot3, turtlebot3_node: the base takes cmd_vel (v, omega) commands and runs "
             "its DYNAMIXELs in velocity mode",
+            "odometry_heading": _ODOMETRY_USE_IMU.format(param_file),
+            "gyro_noise_density": OPENCR_MPU9250.source,
         },
         assumptions={
             "mass": f"derived: sum of the URDF's link masses ({len(links)} links); ROBOTIS gives {spec_mass} kg",
@@ -125,6 +148,7 @@ def _turtlebot3(
             "max_yaw_rate": "derived: the lower of ROBOTIS' limit and no-load speed x R / L "
             f"= {top_speed / half_axle:.4g} rad/s",
             "lag": "none identified; the motor datasheet describes the drive",
+            "gyro_bias": OPENCR_MPU9250.bias_why,
             "motor": "no-load current not published (the 52/40 mA standby current is the electronics): taken as 0",
         },
     )

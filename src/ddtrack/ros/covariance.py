@@ -8,10 +8,12 @@ the estimate of ``[sensing] odometry`` it is the estimator's own uncertainty, li
   errors are correlated (their sum telescopes): the propagation carries the last reading's error in its state;
 * the pose error follows the arc update's Jacobians: delta_{k+1} = F_k delta_k + G_k (e_k - e_{k+1});
 * an absolute fix blended with gain g replaces delta by (1 - g) delta + g n, n the fix's noise;
-* the speeds are increments over T_c: var v = R^2 q^2 / (12 T_c^2), var omega = var v / L^2, uncorrelated.
+* the speeds are increments over T_c: var v = R^2 q^2 / (12 T_c^2), var omega = var v / L^2, uncorrelated;
+* with the heading from a gyro of white rate noise of density N, each period's turn is off by an independent error
+  of variance N^2 T_c (the encoders still give the distance), and var omega = N^2 / T_c.
 
 What the estimator cannot know is not in it: a wheel radius or half axle other than its nominal R-hat, L-hat,
-wheels that slip. The true pose's ``/odom`` is exact, so its covariance is zero.
+wheels that slip, a gyro's bias. The true pose's ``/odom`` is exact, so its covariance is zero.
 """
 
 from __future__ import annotations
@@ -35,11 +37,13 @@ def odometry_covariances(
     fix_gain: float = 0.0,
     fix_position_std: float = 0.0,
     fix_heading_std: float = 0.0,
+    gyro_noise_density: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(pose, twist) covariances, each (N, 36) row-major, of the odometry estimate in ``columns`` (``odom_theta``,
     ``odom_v``, ``odom_omega`` per control period), with the nominal ``wheel_radius`` R and ``half_axle`` L [m],
     control ``period`` T_c [s], ``encoder_counts`` n per revolution (0: exact angles) and an absolute fix every
-    ``fix_periods`` periods (0: none) blended with ``fix_gain`` and noise of these standard deviations [m], [rad].
+    ``fix_periods`` periods (0: none) blended with ``fix_gain`` and noise of these standard deviations [m], [rad];
+    ``gyro_noise_density`` [rad/s/sqrt(Hz)]: the turns come from a gyro of that white noise (None: the encoders').
     """
     theta, v, omega = (np.asarray(columns[f"odom_{name}"], dtype=float) for name in ("theta", "v", "omega"))
     reading = 0.0 if encoder_counts == 0 else (2.0 * np.pi / encoder_counts) ** 2 / 12.0
@@ -49,6 +53,10 @@ def odometry_covariances(
     sigma[3:, 3:] = reading * np.eye(2)
     pose = np.zeros((len(theta), 3, 3))
     wheels = np.array([[0.5, 0.5], [0.5 / half_axle, -0.5 / half_axle]]) * wheel_radius  # (dphi_R, dphi_L) -> (d, turn)
+    gyro = gyro_noise_density is not None
+    if gyro:  # the encoders give the distance only; the turn's error is the gyro's, fresh each period
+        wheels[1] = 0.0
+    density = gyro_noise_density or 0.0
     for k in range(1, len(theta)):
         distance, turn = v[k] * period, omega[k] * period  # the arc of period k - 1 -> k, as the estimate took it
         middle = theta[k - 1] + turn / 2.0
@@ -64,13 +72,14 @@ def odometry_covariances(
         step = np.block([[f, g], [np.zeros((2, 3)), np.zeros((2, 2))]])
         noise = np.vstack([-g, np.eye(2)])  # the new readings' errors enter the increment with a minus sign
         sigma = step @ sigma @ step.T + reading * noise @ noise.T
+        sigma[:3, :3] += density**2 * period * np.outer(arc[:, 1], arc[:, 1])
         if fix_periods and k % fix_periods == 0:
             sigma[:3, :3] = (1.0 - fix_gain) ** 2 * sigma[:3, :3] + fix_gain**2 * fix
             sigma[:3, 3:] *= 1.0 - fix_gain
             sigma[3:, :3] *= 1.0 - fix_gain
         pose[k] = sigma[:3, :3]
     speed = 4.0 * reading * (wheel_radius / 2.0 / period) ** 2  # two increments, each of two readings' errors
-    twist = np.diag([speed, 0.0, speed / half_axle**2])
+    twist = np.diag([speed, 0.0, density**2 / period if gyro else speed / half_axle**2])
     return _ros_six(pose), _ros_six(np.broadcast_to(twist, pose.shape))
 
 

@@ -80,7 +80,7 @@ COLUMN_UNITS = {
     "m_hat": "kg",
     "inertia_hat": "kg m^2",
     **dict.fromkeys(("saturated", "gate", "rotating", "mu_required", "mu_used", "sliding", "emulator_loss"), "1"),
-    "fix_clock": "1",
+    "sensing_clock": "1",
 }
 
 
@@ -180,6 +180,7 @@ def viewer_of(scenario: Any, columns: Mapping[str, np.ndarray], frames: Frames) 
     sensing = scenario.sensing
     if sensing.odometry and all(f"odom_{name}" in columns for name in ("theta", "v", "omega")):
         period = scenario.simulation.control_period
+        gyro = sensing.gyro(robot)  # (noise density, bias) where the heading comes from a gyro
         covariances = odometry_covariances(
             columns,
             wheel_radius=scenario.robot.wheel_radius,
@@ -190,6 +191,7 @@ def viewer_of(scenario: Any, columns: Mapping[str, np.ndarray], frames: Frames) 
             fix_gain=sensing.fix_gain,
             fix_position_std=sensing.fix_position_std,
             fix_heading_std=sensing.fix_heading_std,
+            gyro_noise_density=None if gyro is None else gyro[0],
         )
     return Viewer(
         frames,

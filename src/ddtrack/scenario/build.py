@@ -112,7 +112,7 @@ def build(
             # a velocity controller on the default torque plant drives the unicycle with ideal velocity tracking
             kinematic=output == "velocity" and scenario.plant.model == "dynamic",
             plant_model=plant_kind(scenario.plant.model).model(scenario),
-            sensing=scenario.sensing.build(sim.control_period),
+            sensing=scenario.sensing.build(sim.control_period, scenario.robot.preset_robot()),
         )
     except InputMismatch as exc:  # a wrong pairing that the shared inner loop's key fixes names that key
         if "inner" not in getattr(type(config), "model_fields", {}):

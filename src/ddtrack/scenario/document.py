@@ -107,6 +107,11 @@ class Scenario(_Section):
                 )
         return self
 
+    @model_validator(mode="after")
+    def _gyro_is_known(self) -> Scenario:
+        self.sensing.gyro(self.robot.preset_robot())  # a gyro heading without its numbers names them
+        return self
+
     def divergence_distance(self) -> float:
         """``simulation.divergence_error``, or the bound that scales with the scenario
         (:func:`ddtrack.feasibility.divergence_bound`) [m]."""
