@@ -136,12 +136,15 @@ def test_the_documentation_shows_the_numbers_the_code_holds(name):
     assert robots.markdown_table(robots.preset(name)) in page
 
 
-@pytest.mark.parametrize(("name", "needed"), [("turtlebot3_burger", 1.93), ("turtlebot3_waffle_pi", 1.63)])
-def test_the_grip_needed_at_stall_counts_the_wheels_spin_inertia(name, needed):
+@pytest.mark.parametrize(
+    ("name", "static", "needed"), [("turtlebot3_burger", 1.93, 7.33), ("turtlebot3_waffle_pi", 1.63, 1.99)]
+)
+def test_the_grip_needed_at_stall_counts_the_wheels_spin_inertia_and_the_load_moved(name, static, needed):
     """From rest at full torque, part of each wheel's torque spins the wheel itself up: the floor's push is the
     body's m a / 2 under the Lagrangian model (which carries the wheels' spin inertia), not tau / R. The TurtleBots'
-    geared servos reflect 3.7 and 5.8 times the body's mass at the wheels, so they need 1.93 and 1.63, not the 9.09
-    and 11.1 that tau / R over the load gave."""
+    geared servos reflect 3.7 and 5.8 times the body's mass at the wheels, so over the static loads they need 1.93 and
+    1.63, not the 9.09 and 11.1 that tau / R over the load gave. Accelerating at 18 and 15 m/s^2 moves load from the
+    drive wheels onto the casters behind them (centre of mass 3.1 and 2.0 cm up): 7.33 and 1.99."""
     import jax.numpy as jnp
 
     from ddtrack.model.dynamics import body_acceleration
@@ -152,5 +155,13 @@ def test_the_grip_needed_at_stall_counts_the_wheels_spin_inertia(name, needed):
     v_dot, omega_dot = body_acceleration(params, jnp.zeros(2), stall, jnp.zeros(2))
     push = found.params["mass"] * float(v_dot) / 2.0  # each wheel's share of m a
     assert abs(float(omega_dot)) < 1e-12  # straight ahead
-    assert found.friction_at_torque_limit() == pytest.approx(push / found.wheel_load(), rel=1e-12)
+    assert push / found.wheel_load() == pytest.approx(static, abs=0.005)
+    # the slip plant's own loads: at rest the static share, and N_0 + h F_x / (2 l_c) with F_x = 2 push
+    from ddtrack.model import slip_plant
+
+    plant = slip_plant(params, caster=found.caster_position, com_height=found.com_height)
+    assert float(plant.normals(plant.init(jnp.zeros(5)))[0]) == pytest.approx(found.wheel_load(), rel=1e-12)
+    moved = found.wheel_load() + found.com_height * 2.0 * push / (2.0 * found.caster_position)
+    assert found.accelerating_load(push) == pytest.approx(moved, rel=1e-12) and moved < found.wheel_load()
+    assert found.friction_at_torque_limit() == pytest.approx(push / found.accelerating_load(push), rel=1e-12)
     assert found.friction_at_torque_limit() == pytest.approx(needed, abs=0.005)

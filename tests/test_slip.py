@@ -223,20 +223,26 @@ def test_on_a_slip_plant_the_grip_reported_is_what_its_own_contact_forces_used(t
     table = pq.read_table(out / "timeseries.parquet")
     c = {name: table.column(name).to_numpy() for name in table.column_names}
     assert np.all(c["mu_used"] <= 0.01) and np.mean(c["sliding"]) * 1.0 == pytest.approx(metrics["time_sliding"])
-    # the plant's own force on the wheel that slides harder, F_ix = -mu N s_ix / sqrt(|s_i|^2 + eps^2), against the
-    # reported use: mu_used N |s_ix| / |s_i| = |F_ix|, with N = m g (1 - d / l_c) / 2 from the robot's numbers
+    # the plant's own force on the wheel that slides harder, F_ix = -mu N_i s_ix / sqrt(|s_i|^2 + eps^2), against the
+    # reported use: mu_used N_i |s_ix| / |s_i| = |F_ix|, with the wheel's logged load N_i
     slides = np.hypot([c["slip_r"], c["slip_l"]], c["slip_lateral"])
     harder = np.argmax(slides, axis=0)
     along = np.choose(harder, [c["slip_r"], c["slip_l"]])
     force = np.choose(harder, [c["force_rx"], c["force_lx"]])
+    normal = np.choose(harder, [c["normal_r"], c["normal_l"]])
+    checked = np.abs(along) > 1e-6
+    implied = c["mu_used"][checked] * normal[checked] * np.abs(along[checked]) / slides.max(axis=0)[checked]
+    assert checked.sum() > 15 and np.abs(force[checked]) == pytest.approx(implied, rel=1e-9)
+    # the loads: the static share m g (1 - d / l_c) / 2, moved by the Burger's centre of mass 3 cm up as it brakes
     scenario = ddtrack.load_scenario(SCENARIOS / "burger_sized_20hz.toml", overrides=BURGER, controller="backstepping")
     params = scenario.plant_params()
     from ddtrack.model.slip import load_fraction
 
-    normal = params.mass * GRAVITY * float(load_fraction(params, preset("turtlebot3_burger").caster_position)) / 2
-    checked = np.abs(along) > 1e-6
-    implied = c["mu_used"][checked] * normal * np.abs(along[checked]) / slides.max(axis=0)[checked]
-    assert checked.sum() > 15 and np.abs(force[checked]) == pytest.approx(implied, rel=1e-9)
+    static = params.mass * GRAVITY * float(load_fraction(params, preset("turtlebot3_burger").caster_position)) / 2
+    total = c["normal_r"] + c["normal_l"]
+    height, caster = preset("turtlebot3_burger").com_height, preset("turtlebot3_burger").caster_position
+    moved = height * (c["force_rx"] + c["force_lx"]) / caster  # h F_x / l_c onto both drive wheels
+    assert total == pytest.approx(2 * static + moved, rel=1e-9) and np.ptp(total) > 1e-4 * static
 
 
 @pytest.mark.parametrize(
@@ -280,3 +286,94 @@ def test_the_rosenbrock_step_is_second_order_and_damps_a_stiff_mode():
     matrix = jnp.asarray(np.eye(5) * 3.0 + np.random.default_rng(0).uniform(-0.5, 0.5, (5, 5)))
     b = jnp.arange(5.0)
     assert np.allclose(lu_solve_unpivoted(lu_unpivoted(matrix), b), np.linalg.solve(matrix, b), rtol=1e-12)
+
+
+# --- load transfer (centre of mass above the floor) ------------------------------------------------------------------
+
+HIGH = 0.2  #: an exaggerated height of the centre of mass [m], so the transfer shows
+
+
+def test_loads_balance_the_moments_about_the_centre_of_mass():
+    """Whatever the motion, the body neither rolls nor pitches: the moments about the centre of mass C = (d, 0, h) of
+    the wheels' loads and floor forces and of the caster's load cancel, and the three loads carry the weight. Solved
+    here for (N_R, N_L, N_caster) from those three equations, apart from the plant's closed form."""
+    plant = slip_plant(GEARED, friction=0.8, caster=CASTER, period=PERIOD, substeps=10, com_height=HIGH)
+    states = rollout(plant, plant.init(jnp.zeros(5)), 6.0 * wavy_torques(150), plant.substeps)
+    m, d, half = GEARED.mass, GEARED.com_offset, GEARED.half_axle
+    centre = np.array([d, 0.0, HIGH])
+    points = np.array([[0.0, -half, 0.0], [0.0, half, 0.0], [CASTER, 0.0, 0.0]]) - centre  # right, left, caster
+    moved = 0.0
+    for x in states[::10]:
+        f_rx, f_ry, f_lx, f_ly = (float(f) for f in plant.forces(x))
+        # moment of (F_x, F_y, N) at r: x component r_y N - r_z F_y, y component r_z F_x - r_x N
+        rows = [[1.0, 1.0, 1.0], [p[1] for p in points], [-p[0] for p in points]]
+        known = [
+            m * GRAVITY,
+            points[0][2] * f_ry + points[1][2] * f_ly,
+            -(points[0][2] * f_rx + points[1][2] * f_lx),
+        ]
+        loads = np.linalg.solve(np.array(rows), np.array(known))
+        assert [float(n) for n in plant.normals(x)] == pytest.approx(loads[:2], rel=1e-9)
+        moved = max(moved, abs(loads[0] - loads[1]) / loads[:2].sum())
+    assert moved > 0.05  # the run did move load between the wheels
+
+
+def test_beyond_grip_load_transfer_raises_the_acceleration_to_its_closed_form():
+    """Straight ahead beyond grip with the caster ahead, accelerating moves load onto the drive wheels: m a = mu N_w,
+    N_w = m g (1 - d / l_c) + m h a / l_c, so a = mu g (1 - d / l_c) / (1 - mu h / l_c) (h = 0: the static limit)."""
+    mu = 0.8
+    plant = slip_plant(GEARED, friction=mu, caster=CASTER, period=PERIOD, substeps=10, com_height=HIGH)
+    torques = 10.0 * jnp.ones((50, 2))
+    speed = np.asarray(rollout(plant, plant.init(jnp.zeros(5)), torques, plant.substeps)[:, 3])
+    late = (np.diff(speed) / PERIOD)[-10:].mean()
+    static = mu * GRAVITY * (1.0 - GEARED.com_offset / CASTER)
+    assert late == pytest.approx(static / (1.0 - mu * HIGH / CASTER), rel=0.01)
+    assert late > 1.3 * static
+
+
+def test_a_steady_turn_loads_the_outer_wheel():
+    """On a steady circle the side force m u r at height h moves m u r h / (2 L) from the inner (left) wheel to the
+    outer (right); with h = 0 the loads are the static share, exactly."""
+    params = RobotParams(wheel_inertia=0.005, viscous_friction=0.05)
+    v, omega = 0.5, 1.0
+    m, d, half, radius = params.mass, params.com_offset, params.half_axle, params.wheel_radius
+    coriolis = np.array([-m * d * omega**2, m * d * omega * v])
+    held = 0.05 * np.array([v + half * omega, v - half * omega]) / radius
+    held += radius / 2.0 * np.array([[1.0, 1.0 / half], [1.0, -1.0 / half]]) @ coriolis
+    torques = jnp.broadcast_to(jnp.asarray(held), (400, 2))
+    static = m * GRAVITY * (1.0 - d / CASTER) / 2.0
+    for height in (0.0, HIGH):
+        plant = slip_plant(params, friction=0.8, caster=CASTER, period=PERIOD, substeps=10, com_height=height)
+        final = rollout(plant, plant.init(jnp.asarray([0.0, 0.0, 0.0, v, omega])), torques, plant.substeps)[-1]
+        right, left = (float(n) for n in plant.normals(final))
+        u, r = float(final[3]), float(final[5])
+        if height == 0.0:
+            assert (right, left) == (static, static)
+        else:
+            assert right - left == pytest.approx(m * u * r * height / half, rel=0.02)
+            assert right > static > left
+
+
+def test_a_wheel_that_would_lift_carries_nothing():
+    """A centre of mass far too high for the turn: the inner wheel's load would go negative; it is held at 0."""
+    plant = slip_plant(GEARED, friction=2.0, caster=CASTER, period=PERIOD, substeps=10, com_height=3.0)
+    x = plant.init(jnp.asarray([0.0, 0.0, 0.0, 1.0, 0.0]))
+    x = x.at[4].set(-0.5)  # sliding sideways at 0.5 m/s: the floor pushes back with up to mu N on each wheel
+    right, left = (float(n) for n in plant.normals(x))
+    assert min(right, left) == 0.0 and max(right, left) > 0.0
+    columns = plant.logged(x, jnp.zeros(2))
+    assert float(columns["normal_r"]) == right and float(columns["normal_l"]) == left
+
+
+def test_the_preset_gives_the_height_and_plant_com_height_replaces_it():
+    from ddtrack.scenario.slip_configs import slip_options
+
+    burger = ddtrack.load_scenario(SCENARIOS / "burger_cmd_vel_figure8.toml", overrides=["plant.model=slip_velocity"])
+    assert slip_options(burger)["com_height"] == preset("turtlebot3_burger").com_height > 0.02
+    overrides = ["plant.model=slip_velocity", "plant.com_height=0.09"]
+    given = ddtrack.load_scenario(SCENARIOS / "burger_cmd_vel_figure8.toml", overrides=overrides)
+    assert slip_options(given)["com_height"] == 0.09
+    paper = ddtrack.load_scenario(
+        SCENARIOS / "circle.toml", overrides=["plant.model=slip", "plant.wheel_inertia=0.005"]
+    )
+    assert slip_options(paper)["com_height"] == 0.0  # no preset, no height: no load transfer

@@ -7,8 +7,15 @@ spins at its own speed phi_dot_i. Each wheel's contact point slides over the flo
     s_R = (u + L r - R phi_dot_R, w),        s_L = (u - L r - R phi_dot_L, w)
 
 and the floor pushes back along a regularised Coulomb friction circle, F_i = -mu N_i s_i / sqrt(|s_i|^2 + eps_s^2),
-with the static normal load N_i = m g (1 - d / l_c) / 2 of a frictionless caster at body x = l_c. Newton-Euler
-about the centre of mass C = (d, 0) and each wheel's spin give
+with the static normal load N_i = m g (1 - d / l_c) / 2 of a frictionless caster at body x = l_c. With the centre
+of mass at height h, accelerating and turning move load (the body neither pitches nor rolls; moments about the
+axle's contact line and about the body's x axis):
+
+    N_R = m g (1 - d / l_c) / 2 + h F_x / (2 l_c) + h F_y / (2 L),   N_L = ... - h F_y / (2 L)
+
+F_x, F_y the floor's total force (m times the centre of mass's acceleration); as the forces scale with the loads,
+the two loads solve a 2 x 2 linear system, and a load that would go negative (a wheel lifting) is held at 0.
+Newton-Euler about the centre of mass C = (d, 0) and each wheel's spin give
 
     m (u_dot - r w - d r^2) = F_Rx + F_Lx
     m (w_dot + d r_dot + r u) = F_Ry + F_Ly
@@ -44,10 +51,10 @@ SLIP_STATE = Layout(
     ("x", "y", "theta", "u", "w", "r", "phidot_r", "phidot_l"),
     ("m", "m", "rad", "m/s", "m/s", "rad/s", "rad/s", "rad/s"),
 )
-#: what it logs each period: applied torques (named as DynamicPlant's), slip speeds and the floor's forces
+#: what it logs each period: applied torques (named as DynamicPlant's), slip speeds, the floor's forces and loads
 SLIP_LOGS = Layout(
-    ("tau_r", "tau_l", "slip_r", "slip_l", "slip_lateral", "force_rx", "force_lx", "force_y"),
-    ("N m", "N m", "m/s", "m/s", "m/s", "N", "N", "N"),
+    ("tau_r", "tau_l", "slip_r", "slip_l", "slip_lateral", "force_rx", "force_lx", "force_y", "normal_r", "normal_l"),
+    ("N m", "N m", "m/s", "m/s", "m/s", "N", "N", "N", "N", "N"),
 )
 #: |h lambda| an explicit RK4 step stays stable at on the negative real axis is 2.78; kept with a margin
 RK4_STABLE_STEP = 2.0
@@ -95,6 +102,8 @@ class SlipPlant:
     pwm_model : DCMotor or None
         With a motor: None for a current-controlled board, else the board's model of its motor, through which it
         turns the torque command into a PWM voltage (:func:`~ddtrack.model.motors.drive_torque`).
+    com_height : float
+        Height h [m] of the centre of mass above the floor; 0: the static loads, no load transfer.
     scheme : str
         ``"rk4"`` or ``"rosenbrock"`` (static).
     substeps : int
@@ -107,6 +116,7 @@ class SlipPlant:
     caster: Array | float = math.inf
     motor: DCMotor | None = None
     pwm_model: DCMotor | None = None
+    com_height: Array | float = 0.0
     scheme: str = static_field(default="rk4")
     substeps: int = static_field(default=1)
     state_layout: ClassVar[Layout] = SLIP_STATE
@@ -146,15 +156,36 @@ class SlipPlant:
         u, w, r = x[3], x[4], x[5]
         return u + p.half_axle * r - p.wheel_radius * x[6], u - p.half_axle * r - p.wheel_radius * x[7], w
 
-    def forces(self, x: Array) -> tuple[Array, Array, Array, Array]:
-        """(F_Rx, F_Ry, F_Lx, F_Ly) [N]: the floor's force on each wheel in the body frame."""
+    def normals(self, x: Array) -> tuple[Array, Array]:
+        """(N_R, N_L) [N]: each drive wheel's load, the static share moved by the body's acceleration.
+
+        N_i = N_0 + a F_x +- b F_y with a = h / (2 l_c), b = h / (2 L), and F = N_R f_R + N_L f_L where f_i is the
+        floor's force per newton of load (the friction circle's -mu s_i / sqrt(|s_i|^2 + eps_s^2)): a 2 x 2 linear
+        system, solved in closed form. With h = 0 it is N_0 = m g (1 - d / l_c) / 2 exactly.
+        """
         p = self.params
         right, left, lateral = self.slips(x)
-        normal = p.mass * GRAVITY * load_fraction(p, self.caster) / 2.0
+        eps2 = jnp.asarray(self.slip_speed) ** 2
+        unit_r = -self.friction / jnp.sqrt(right**2 + lateral**2 + eps2)
+        unit_l = -self.friction / jnp.sqrt(left**2 + lateral**2 + eps2)
+        rx, ry, lx, ly = unit_r * right, unit_r * lateral, unit_l * left, unit_l * lateral
+        static = p.mass * GRAVITY * load_fraction(p, self.caster) / 2.0
+        a = self.com_height / (2.0 * jnp.asarray(self.caster))  # 0 without a caster (l_c = inf)
+        b = self.com_height / (2.0 * p.half_axle)
+        a11, a12 = 1.0 - a * rx - b * ry, -a * lx - b * ly
+        a21, a22 = -a * rx + b * ry, 1.0 - a * lx + b * ly
+        det = a11 * a22 - a12 * a21
+        # a wheel whose load would go negative has lifted: it carries nothing (the model ends at tipping)
+        return jnp.maximum(static * (a22 - a12) / det, 0.0), jnp.maximum(static * (a11 - a21) / det, 0.0)
+
+    def forces(self, x: Array) -> tuple[Array, Array, Array, Array]:
+        """(F_Rx, F_Ry, F_Lx, F_Ly) [N]: the floor's force on each wheel in the body frame."""
+        right, left, lateral = self.slips(x)
+        normal_r, normal_l = self.normals(x)
         eps2 = jnp.asarray(self.slip_speed) ** 2
         # regularised Coulomb circle: the full mu N once the slip is well above eps_s
-        scale_r = -self.friction * normal / jnp.sqrt(right**2 + lateral**2 + eps2)
-        scale_l = -self.friction * normal / jnp.sqrt(left**2 + lateral**2 + eps2)
+        scale_r = -self.friction * normal_r / jnp.sqrt(right**2 + lateral**2 + eps2)
+        scale_l = -self.friction * normal_l / jnp.sqrt(left**2 + lateral**2 + eps2)
         return scale_r * right, scale_r * lateral, scale_l * left, scale_l * lateral
 
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
@@ -184,11 +215,13 @@ class SlipPlant:
         return rk4(rate, x, period, steps)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
-        """Applied torques, slip speeds and the floor's forces at the start of the period (:data:`SLIP_LOGS`)."""
+        """Applied torques, slip speeds, the floor's forces and the wheels' loads at the start of the period
+        (:data:`SLIP_LOGS`)."""
         tau = self.applied(x, u)
         f_rx, f_ry, f_lx, f_ly = self.forces(x)
         right, left, lateral = self.slips(x)
-        values = (tau[0], tau[1], right, left, lateral, f_rx, f_lx, f_ry + f_ly)
+        normal_r, normal_l = self.normals(x)
+        values = (tau[0], tau[1], right, left, lateral, f_rx, f_lx, f_ry + f_ly, normal_r, normal_l)
         return dict(zip(SLIP_LOGS.names, values, strict=True))
 
 
@@ -199,6 +232,7 @@ def contact_stiffness(
     caster: float = math.inf,
     motor: DCMotor | None = None,
     speed_gain: float = 0.0,
+    com_height: float = 0.0,
 ) -> float:
     """An upper estimate of the fastest decay rate [1/s] of the slip plant, from nominal (float) numbers.
 
@@ -207,6 +241,8 @@ def contact_stiffness(
     A). Added to it: the wheel friction's slope (b_w + tau_c / eps_f) / J_w and the back-EMF's eta k_t k_e / (R_a J_w)
     (a wheel on the torque-speed curve), each acting on a wheel's spin alone; a PI wheel-speed loop of proportional
     gain ``speed_gain`` k_p [V s/rad] adds eta k_t k_p / (R_a J_w) (model.md §1.10, the velocity-driven variant).
+    With the centre of mass at ``com_height`` h the load N is taken at its most, N_0 + mu m g h (1 / (2 |l_c|) +
+    1 / (2 L)) (the floor's forces are at most mu m g).
     """
     m, d, inertia = float(params.mass), float(params.com_offset), float(params.inertia)
     radius, half, spin = float(params.wheel_radius), float(params.half_axle), float(params.wheel_inertia)
@@ -217,6 +253,7 @@ def contact_stiffness(
     )
     modes = np.linalg.eigvals(np.linalg.solve(mass_matrix, slip_map.T @ slip_map))
     normal = m * GRAVITY * float(load_fraction(params, caster)) / 2.0
+    normal += friction * m * GRAVITY * com_height * (1.0 / (2.0 * abs(caster)) + 1.0 / (2.0 * half))
     rate = friction * normal / slip_speed * float(np.max(modes.real))
     rate += (float(params.viscous_friction) + float(params.coulomb_friction) / float(params.friction_smoothing)) / spin
     if motor is not None:
@@ -258,6 +295,7 @@ def slip_plant_model(
     substeps: int = 10,
     scheme: str | None = None,
     pwm_model: DCMotor | None = None,
+    com_height: float = 0.0,
 ) -> Callable[[RobotParams], SlipPlant]:
     """A ``Setup.plant_model`` giving the :class:`SlipPlant` of a drawn robot, alone or as a batch (the scalars
     take the parameters' leading batch axis), its integration chosen once from the ``nominal`` robot (floats) by
@@ -265,15 +303,17 @@ def slip_plant_model(
 
     ``scheme`` forces ``"rk4"`` (with the steps the stability rule needs) or ``"rosenbrock"``. Raises ValueError for
     J_w <= 0 or a caster not beyond the centre of mass (here and for every drawn robot). ``pwm_model``: the board's
-    model of ``motor`` when it offers PWM only (:class:`SlipPlant`).
+    model of ``motor`` when it offers PWM only (:class:`SlipPlant`); ``com_height``: the centre of mass's height h [m].
     """
-    l_c, chosen, steps = slip_integration(nominal, friction, slip_speed, caster, motor, period, substeps, scheme)
+    l_c, chosen, steps = slip_integration(
+        nominal, friction, slip_speed, caster, motor, period, substeps, scheme, com_height=com_height
+    )
 
     def plant_model(params: RobotParams) -> SlipPlant:
         check_drawn(params, l_c)  # a drawn robot too
-        mu, eps, held_caster = broadcast_like(params, (friction, slip_speed, l_c))
+        mu, eps, held_caster, height = broadcast_like(params, (friction, slip_speed, l_c, com_height))
         motors = broadcast_like(params, motor), broadcast_like(params, pwm_model)
-        return SlipPlant(params, mu, eps, held_caster, *motors, scheme=chosen, substeps=steps)
+        return SlipPlant(params, mu, eps, held_caster, *motors, com_height=height, scheme=chosen, substeps=steps)
 
     return plant_model
 
@@ -288,13 +328,15 @@ def slip_integration(
     substeps: int,
     scheme: str | None,
     speed_gain: float = 0.0,
+    com_height: float = 0.0,
 ) -> tuple[float, str, int]:
     """(l_c, scheme, sub-steps) of a slip plant for the ``nominal`` robot (floats), checked as
-    :func:`slip_plant_model` says; ``speed_gain`` the proportional gain of a PI wheel-speed loop, if any."""
+    :func:`slip_plant_model` says; ``speed_gain`` the proportional gain of a PI wheel-speed loop, if any;
+    ``com_height`` the centre of mass's height [m]."""
     require_wheel_inertia(nominal)
     l_c = math.inf if caster is None else float(caster)
     _check_caster(nominal, l_c)
-    stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor, speed_gain)
+    stiffness = contact_stiffness(nominal, friction, slip_speed, l_c, motor, speed_gain, com_height)
     chosen, steps = choose_integration(stiffness, period, substeps)
     if scheme is not None and scheme != chosen:  # forced: with the steps the rule gives that scheme
         chosen = scheme

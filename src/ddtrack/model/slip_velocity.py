@@ -123,19 +123,21 @@ def slip_velocity_model(
     period: float = 0.01,
     substeps: int = 10,
     scheme: str | None = None,
+    com_height: float = 0.0,
 ) -> Callable[[RobotParams], SlipVelocityPlant]:
     """A ``Setup.plant_model`` giving the :class:`SlipVelocityPlant` of a drawn robot, alone or as a batch; the
     scheme and sub-steps chosen from the ``nominal`` robot as ``slip_plant_model`` does, the loop's proportional
     gain counted in the stiffness. Raises ValueError for J_w <= 0 or a caster not beyond the centre of mass."""
     gain = float(driver.kp)
     l_c, chosen, steps = slip_integration(
-        nominal, friction, slip_speed, caster, driver.motor, period, substeps, scheme, gain
+        nominal, friction, slip_speed, caster, driver.motor, period, substeps, scheme, gain, com_height
     )
 
     def plant_model(params: RobotParams) -> SlipVelocityPlant:
         check_drawn(params, l_c)
-        floor = broadcast_like(params, (friction, slip_speed, l_c))
-        slip = SlipPlant(params, *floor)  # no motor: its torque input is the loop's applied torque
+        mu, eps, held_caster, height = broadcast_like(params, (friction, slip_speed, l_c, com_height))
+        # no motor: its torque input is the loop's applied torque
+        slip = SlipPlant(params, mu, eps, held_caster, com_height=height)
         return SlipVelocityPlant(slip, broadcast_like(params, driver), chosen, steps)
 
     return plant_model

@@ -21,6 +21,7 @@ from .datasheets import (
     RobotPreset,
     UrdfLink,
     composite_body,
+    composite_height,
     markdown_table,
     rpm,
 )
@@ -61,6 +62,7 @@ __all__ = [
     "RobotPreset",
     "UrdfLink",
     "composite_body",
+    "composite_height",
     "markdown_table",
     "preset",
     "rpm",

@@ -92,14 +92,21 @@ class GyroDatasheet:
 
 @dataclass(frozen=True)
 class UrdfLink:
-    """One URDF link as far as yaw matters: name, mass [kg], centre of mass (x, y) [m] in the base frame (axle
-    midpoint at the origin, x forward) and yaw inertia about its own centre of mass [kg m^2] (0: a point mass)."""
+    """One URDF link as far as yaw and load transfer matter: name, mass [kg], centre of mass (x, y) [m] in the base
+    frame (axle midpoint at the origin, x forward), yaw inertia about its own centre of mass [kg m^2] (0: a point
+    mass) and the centre of mass's height z above the floor [m]."""
 
     name: str
     mass: float
     x: float
     y: float
     yaw_inertia: float = 0.0
+    z: float = 0.0
+
+
+def composite_height(links: tuple[UrdfLink, ...]) -> float:
+    """Height above the floor [m] of the centre of mass of rigidly joined links: sum m_i z_i / sum m_i."""
+    return sum(link.mass * link.z for link in links) / sum(link.mass for link in links)
 
 
 def composite_body(links: tuple[UrdfLink, ...]) -> tuple[float, float, float]:
@@ -160,6 +167,9 @@ class RobotPreset:
         motors' no-load speed at its supply voltage (``Scenario.top_speeds``).
     gyro : GyroDatasheet or None
         The gyro the robot's stock odometry takes its heading from; None: its odometry turns with the wheels.
+    com_height : float or None
+        Height of the centre of mass above the floor [m], for the slip plants' load transfer; None where unknown
+        (no load transfer is modelled).
     """
 
     name: str
@@ -176,6 +186,7 @@ class RobotPreset:
     assumptions: Mapping[str, str]
     rated_limits: tuple[float, float] | None = None
     gyro: GyroDatasheet | None = None
+    com_height: float | None = None
 
     @property
     def rated_speed(self) -> float | None:
@@ -209,6 +220,7 @@ class RobotPreset:
             "lag": self.lag,
             "input": self.input,
             "odometry_heading": "gyro" if self.gyro else "encoders",
+            "com_height": self.com_height,
         }
         if self.gyro is not None:
             values |= {"gyro_noise_density": self.gyro.noise_density, "gyro_bias": self.gyro.bias}
@@ -221,13 +233,23 @@ class RobotPreset:
             return weight / 2.0
         return weight * (1.0 - self.params["com_offset"] / self.caster_position) / 2.0
 
+    def accelerating_load(self, push: float) -> float:
+        """Each drive wheel's load [N] while the floor pushes each wheel forward with ``push`` [N] (model.md §1.10):
+        the static share plus h F / l_c, the load the centre of mass's height moves (none without a height or a
+        caster position)."""
+        if self.com_height is None or self.caster_position is None:
+            return self.wheel_load()
+        return self.wheel_load() + self.com_height * push / self.caster_position
+
     def friction_at_torque_limit(self) -> float:
         """Floor friction a wheel needs at full torque from rest, straight ahead (real floors give 0.3-1.0): the
-        floor's force F over the wheel's load, where the torque first spins the wheel up, J_w a / R^2 of it, so
-        F = (max_torque / R) / (1 + 2 J_w / (m R^2)) with a = 2 F / m."""
+        floor's force F over the wheel's load while accelerating (:meth:`accelerating_load`), where the torque first
+        spins the wheel up, J_w a / R^2 of it, so F = (max_torque / R) / (1 + 2 J_w / (m R^2)) with a = 2 F / m;
+        ``inf`` where the load moved off the drive wheels would lift them (the robot would tip onto its caster)."""
         mass, radius = self.params["mass"], self.params["wheel_radius"]
         force = self.params["max_torque"] / radius / (1.0 + 2.0 * self.wheel_inertia / (mass * radius**2))
-        return force / self.wheel_load()
+        load = self.accelerating_load(force)
+        return force / load if load > 0.0 else math.inf
 
 
 def markdown_table(preset: RobotPreset) -> str:

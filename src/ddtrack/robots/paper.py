@@ -46,6 +46,7 @@ PAPER = RobotPreset(
         "max_yaw_rate": "none: torque sources without back-EMF have no top yaw rate",
         "motor": "none: the paper commands wheel torques directly",
         "lag": "none: a torque-level model",
+        "com_height": "not given by the paper: none, so the slip plants model no load transfer",
         "odometry_heading": "the paper has no odometry; with [sensing] odometry on it turns with the encoders",
         "input": "the paper's controllers compute wheel torques",
     },

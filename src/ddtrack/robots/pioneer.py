@@ -56,6 +56,7 @@ PIONEER_3DX = RobotPreset(
         "input": _MARTINS + " (the model takes velocity commands)",
     },
     assumptions={
+        "com_height": "not published: none, so the slip plants model no load transfer (set plant.com_height)",
         "odometry_heading": "the wheel encoders, as ARIA's odometry computes it; the optional gyro accessory is not "
         "modelled",
         "inertia": "assumed: a uniform 455 mm x 381 mm plate, m (a^2 + b^2) / 12; no measured value is published",

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
-from .datasheets import GyroDatasheet, MotorDatasheet, RobotPreset, UrdfLink, composite_body, rpm
+from .datasheets import GyroDatasheet, MotorDatasheet, RobotPreset, UrdfLink, composite_body, composite_height, rpm
 
 _TURTLEBOT3_PAGE = "ROBOTIS e-Manual, TurtleBot3 specifications (https://emanual.robotis.com/docs/en/platform/turtlebot3/specifications/)"
 _DXL = "ROBOTIS e-Manual, TurtleBot3 appendix DYNAMIXEL (https://emanual.robotis.com/docs/en/platform/turtlebot3/appendix_dynamixel/)"
@@ -52,25 +53,29 @@ OPENCR_MPU9250 = GyroDatasheet(
     f"= {_GYRO_DENSITY / math.sqrt(_GYRO_CALIBRATION):.3g} rad/s; drift with temperature is not modelled",
 )
 
-# The URDF links, as far as yaw matters. A wheel joint is rotated -1.57 rad about x, so the wheel link's y axis is
-# the vertical: its yaw inertia is the URDF's iyy. The caster and laser links are point masses: their URDF inertia
-# tensors (0.001 kg m^2 each, on 5 g and 114 g) are placeholders, a 5 g caster with that inertia would have a
-# radius of gyration of 0.45 m.
+# The URDF links, as far as yaw and load transfer matter. A wheel joint is rotated -1.57 rad about x, so the wheel
+# link's y axis is the vertical: its yaw inertia is the URDF's iyy. The caster and laser links are point masses:
+# their URDF inertia tensors (0.001 kg m^2 each, on 5 g and 114 g) are placeholders, a 5 g caster with that inertia
+# would have a radius of gyration of 0.45 m. Heights: base_link sits 0.010 m above base_footprint (the floor), each
+# link's inertial origin at its joint's z above that.
+_BASE_Z = 0.010
 BURGER_LINKS = (
-    UrdfLink("base_link", 8.2573504e-01, 0.0, 0.0, 2.0064271e-03),
-    UrdfLink("wheel_left_link", 2.8498940e-02, 0.0, 0.080, 1.1192413e-05),
-    UrdfLink("wheel_right_link", 2.8498940e-02, 0.0, -0.080, 1.1192413e-05),
-    UrdfLink("caster_back_link", 0.005, -0.081, 0.0),
-    UrdfLink("base_scan", 0.114, -0.032, 0.0),
+    UrdfLink("base_link", 8.2573504e-01, 0.0, 0.0, 2.0064271e-03, z=_BASE_Z),
+    UrdfLink("wheel_left_link", 2.8498940e-02, 0.0, 0.080, 1.1192413e-05, z=_BASE_Z + 0.023),
+    UrdfLink("wheel_right_link", 2.8498940e-02, 0.0, -0.080, 1.1192413e-05, z=_BASE_Z + 0.023),
+    UrdfLink("caster_back_link", 0.005, -0.081, 0.0, z=_BASE_Z - 0.004),
+    UrdfLink("base_scan", 0.114, -0.032, 0.0, z=_BASE_Z + 0.172),
 )
 WAFFLE_PI_LINKS = (
-    UrdfLink("base_link", 1.3729096e00, 0.0, 0.0, 1.4612727e-02),
-    UrdfLink("wheel_left_link", 2.8498940e-02, 0.0, 0.144, 1.1192413e-05),
-    UrdfLink("wheel_right_link", 2.8498940e-02, 0.0, -0.144, 1.1192413e-05),
-    UrdfLink("caster_back_right_link", 0.005, -0.177, -0.064),
-    UrdfLink("caster_back_left_link", 0.005, -0.177, 0.064),
-    UrdfLink("base_scan", 0.114, -0.064, 0.0),
+    UrdfLink("base_link", 1.3729096e00, 0.0, 0.0, 1.4612727e-02, z=_BASE_Z),
+    UrdfLink("wheel_left_link", 2.8498940e-02, 0.0, 0.144, 1.1192413e-05, z=_BASE_Z + 0.023),
+    UrdfLink("wheel_right_link", 2.8498940e-02, 0.0, -0.144, 1.1192413e-05, z=_BASE_Z + 0.023),
+    UrdfLink("caster_back_right_link", 0.005, -0.177, -0.064, z=_BASE_Z - 0.004),
+    UrdfLink("caster_back_left_link", 0.005, -0.177, 0.064, z=_BASE_Z - 0.004),
+    UrdfLink("base_scan", 0.114, -0.064, 0.0, z=_BASE_Z + 0.122),
 )
+# the centre of base_link's collision box above the floor [m]: where its mass would sit if spread through the box
+BASE_BOX_CENTRE = {"turtlebot3_burger": _BASE_Z + 0.070, "turtlebot3_waffle_pi": _BASE_Z + 0.047}
 TURTLEBOT3_WHEEL_SPIN_INERTIA = 2.0712558e-05  # izz of wheel_left_link, the spin axis [kg m^2]
 
 
@@ -88,6 +93,8 @@ def _turtlebot3(
 ) -> RobotPreset:
     spec_speed, spec_yaw_rate, spec_mass = spec  # ROBOTIS' top speed [m/s], top yaw rate [rad/s], weight [kg]
     mass, x_com, inertia = composite_body(links)
+    height = composite_height(links)
+    boxed = composite_height((dataclasses.replace(links[0], z=BASE_BOX_CENTRE[name]), *links[1:]))
     casters = [link.x for link in links if link.name.startswith("caster")]
     radius, half_axle = 0.033, separation / 2.0
     top_speed = motor.no_load_speed * radius  # both wheels at the no-load speed
@@ -111,6 +118,7 @@ def _turtlebot3(
         max_yaw_rate=min(spec_yaw_rate, top_speed / half_axle),
         rated_limits=(spec_speed, spec_yaw_rate),
         gyro=OPENCR_MPU9250,
+        com_height=height,
         motor=motor,
         lag=None,
         input="velocity",
@@ -130,6 +138,7 @@ def _turtlebot3(
             "its DYNAMIXELs in velocity mode",
             "odometry_heading": _ODOMETRY_USE_IMU.format(param_file),
             "gyro_noise_density": OPENCR_MPU9250.source,
+            "com_height": _URDF.format(urdf),
         },
         assumptions={
             "mass": f"derived: sum of the URDF's link masses ({len(links)} links); ROBOTIS gives {spec_mass} kg",
@@ -149,6 +158,9 @@ def _turtlebot3(
             f"= {top_speed / half_axle:.4g} rad/s",
             "lag": "none identified; the motor datasheet describes the drive",
             "gyro_bias": OPENCR_MPU9250.bias_why,
+            "com_height": "derived: the links' mass-weighted heights; base_link's inertial origin sits at its frame, "
+            "1 cm above the floor, likely a placeholder like its x, so this likely understates the height: with "
+            f"base_link's mass at its collision box's centre it would be {boxed:.3g} m (set plant.com_height)",
             "motor": "no-load current not published (the 52/40 mA standby current is the electronics): taken as 0",
         },
     )

@@ -73,7 +73,7 @@ COLUMN_UNITS = {
     **dict.fromkeys(("tau_r", "tau_l"), "N m"),
     **dict.fromkeys(("i_r", "i_l"), "A"),
     **dict.fromkeys(("u_r", "u_l"), "V"),
-    **dict.fromkeys(("force_rx", "force_lx", "force_y"), "N"),
+    **dict.fromkeys(("force_rx", "force_lx", "force_y", "normal_r", "normal_l"), "N"),
     "kx": "1/s",
     "ky": "1/m^2",
     "ktheta": "1/m",

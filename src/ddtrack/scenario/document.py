@@ -156,7 +156,16 @@ class Scenario(_Section):
     def plant_params(self) -> RobotParams:
         """The true plant's nominal values: [plant] over [robot]."""
         true = self.plant.model_dump(
-            exclude={"floor_friction", "model", "velocity_pi", "slip_speed", "caster_position", "lag", "motor"}
+            exclude={
+                "floor_friction",
+                "model",
+                "velocity_pi",
+                "slip_speed",
+                "caster_position",
+                "com_height",
+                "lag",
+                "motor",
+            }
         )  # the floor and model are not parameters
         merged = self.robot.model_dump(exclude=NOT_PARAMETERS) | {k: v for k, v in true.items() if v is not None}
         return RobotParams(**merged)

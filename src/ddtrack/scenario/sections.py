@@ -266,6 +266,15 @@ class PlantConfig(_Section):
             "none (m g / 2)."
         ),
     )
+    com_height: Annotated[float, Field(ge=0.0, le=5.0)] | None = Field(
+        None,
+        description=(
+            "Height h [m] of the centre of mass above the floor, for models 'slip' and 'slip_velocity': accelerating "
+            "and turning move weight between the drive wheels and the caster, m h a_x / (2 l_c) onto each drive "
+            "wheel and m h a_y / (2 L) from the inner wheel to the outer. Default the [robot] preset's, else 0 "
+            "(no load transfer)."
+        ),
+    )
 
     @model_validator(mode="after")
     def _registered_model(self) -> PlantConfig:

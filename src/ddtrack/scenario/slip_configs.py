@@ -2,7 +2,8 @@
 §1.10).
 
 The floor's friction coefficient is ``plant.floor_friction``, its slip speed ``plant.slip_speed``; the caster is
-``plant.caster_position`` or the ``[robot] preset``'s. A preset with a motor drives the wheels through its
+``plant.caster_position`` or the ``[robot] preset``'s, the centre of mass's height ``plant.com_height`` or the
+preset's (0 without either: no load transfer). A preset with a motor drives the wheels through its
 current-controlled driver (back-EMF bounds their spin); otherwise the torques apply as commanded, within
 max_torque. ``slip_velocity`` drives the preset's motors with the ``plant.velocity_pi`` wheel-speed loop instead, so
 it takes (v, omega) commands and needs a preset with a motor. The integration scheme and sub-steps are chosen once
@@ -47,12 +48,16 @@ def slip_options(scenario: Any) -> dict[str, Any]:
             f"the caster at {caster} m must lie beyond the centre of mass (d = {nominal.com_offset} m), on its side",
             "give a caster position with 0 <= d / caster_position < 1, or leave it out (no caster load)",
         )
+    height = scenario.plant.com_height
+    if height is None:
+        height = 0.0 if robot is None or robot.com_height is None else robot.com_height
     motor = motor_or_none(scenario)
     sim = scenario.simulation
     return {
         "friction": scenario.plant.floor_friction,
         "slip_speed": scenario.plant.slip_speed,
         "caster": caster,
+        "com_height": height,
         "motor": motor,
         "pwm_model": None if motor is None else pwm_model(scenario),
         "period": sim.control_period,
