@@ -325,3 +325,5 @@ def test_a_rate_carries_the_wilson_interval(count, total):
     assert rate["mean"] == count / total and rate["n"] == total
     assert (rate["ci_low"], rate["ci_high"]) == pytest.approx((expected.low, expected.high), abs=1e-12)
     assert rate_ci(0, 0)["mean"] is None
+    # at the ends the bound is exact, not a rounding away from it (a board printed "0 [2.78e-15, 39.0]")
+    assert rate_ci(0, total)["ci_low"] == 0.0 and rate_ci(total, total)["ci_high"] == 1.0

@@ -72,7 +72,9 @@ def rate_ci(count: int, total: int, confidence: float = 0.95) -> dict:
     p = count / total
     centre = (p + z**2 / (2 * total)) / (1 + z**2 / total)
     half = z * math.sqrt(p * (1 - p) / total + z**2 / (4 * total**2)) / (1 + z**2 / total)
-    return {"mean": p, "ci_low": max(0.0, centre - half), "ci_high": min(1.0, centre + half), "n": total}
+    low = 0.0 if count == 0 else max(0.0, centre - half)  # exactly the bound at the ends, not a rounding's 3e-15
+    high = 1.0 if count == total else min(1.0, centre + half)
+    return {"mean": p, "ci_low": low, "ci_high": high, "n": total}
 
 
 def settling_time(t: np.ndarray, e_tr: np.ndarray, threshold: float) -> float | None:
