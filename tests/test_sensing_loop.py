@@ -338,6 +338,18 @@ def test_odometry_turns_as_the_robot_s_own_does_and_a_gyro_without_numbers_is_re
     assert build(ideal).sensing.gyro
 
 
+def test_each_seed_draws_its_own_gyro_noise():
+    """The Burger scenario draws nothing else at random, so two seeds differ only by the gyro's noise (a fixed key
+    for every seed once made them the same run)."""
+    from ddtrack.runner import run as run_scenario
+
+    gyro = ["sensing.gyro_noise_density=0.01", "sensing.gyro_bias=0"]
+    scenario = ddtrack.load_scenario(BURGER, overrides=[*SHORT, *gyro])
+    first, second, again = (np.asarray(run_scenario(scenario, seed=s).logs["odom_etheta"]) for s in (0, 1, 0))
+    assert not np.array_equal(first, second) and np.array_equal(first, again)
+    assert np.abs(first).max() > 1e-3  # the noise shows: 0.01 rad/sqrt(s) over 4 s walks about 0.02 rad
+
+
 @pytest.mark.slow
 def test_a_batch_and_the_environment_see_the_sensing_chain():
     from ddtrack.envs import DiffDriveTrackingEnv

@@ -147,7 +147,8 @@ def prepare(
     # the run's rows, cut on the host: a slice in JAX would compile a program per length
     disturbance, noise = (jax.device_put(np.asarray(d)[:n_steps]) for d in (disturbance, noise))
     setup = build(scenario, plant_params=draw_plant(scenario, keys["parameters"]), controller_key=k_build)
-    if setup.sensing is not None and setup.sensing.fix_period:  # the fix's noise: a key of its own off the noise stream
+    if setup.sensing is not None and (setup.sensing.fix_period or setup.sensing.gyro):
+        # the fix's and the gyro's noise: a key of their own off the run's noise stream, so each seed draws its own
         setup = dataclasses.replace(setup, sensing_key=jax.random.fold_in(keys["noise"], 1))
     if identify and needs_identification(scenario):
         setup = with_identification(scenario, setup, k_identify, identification)

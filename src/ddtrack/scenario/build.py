@@ -39,7 +39,7 @@ class Setup:
     kinematic: bool = False  #: the controller outputs velocity commands (v, omega) to a torque-driven robot
     plant_model: Callable[[RobotParams], Plant] = DynamicPlant  #: the true robot's plant from its parameters
     sensing: Sensing | None = None  #: latency, encoders and odometry between robot and controller (None: none)
-    sensing_key: Any = None  #: the PRNG key of the absolute fix's noise (the run's noise stream; None: a fixed key)
+    sensing_key: Any = None  #: the PRNG key of the fix's and the gyro's noise (the run's noise stream; None: fixed)
 
     def __post_init__(self) -> None:
         try:  # a wrong pairing is named here, before anything is simulated
