@@ -71,9 +71,9 @@ from .sections import ParameterDraw as ParameterDraw
 from .sections import PlantConfig as PlantConfig
 from .sections import RandomizeConfig as RandomizeConfig
 from .sections import RobotConfig as RobotConfig
-from .sections import SensingConfig as SensingConfig
 from .sections import SimulationConfig as SimulationConfig
 from .sections import SinusoidDisturbance as SinusoidDisturbance
+from .sensing_config import SensingConfig as SensingConfig
 from .trajectory_configs import CircleTrajectory as CircleTrajectory
 from .trajectory_configs import FigureEightTrajectory as FigureEightTrajectory
 from .trajectory_configs import LineTrajectory as LineTrajectory

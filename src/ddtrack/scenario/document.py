@@ -23,9 +23,9 @@ from .sections import (
     PlantConfig,
     RandomizeConfig,
     RobotConfig,
-    SensingConfig,
     SimulationConfig,
 )
+from .sensing_config import SensingConfig
 
 MAX_DELAY_PERIODS = 1000  #: the longest [sensing] delay in control periods (its queue is part of the plant's state)
 LOST_PATH_FRACTION = 0.25  #: of the reference's width: a run that stays this far off has lost the path

@@ -1,5 +1,5 @@
 """The scenario's plain sections: ``[simulation]``, ``[robot]``, ``[plant]``, ``[randomize]``, ``[disturbance]``,
-``[noise]``, ``[sensing]`` and ``[initial]``.
+``[noise]`` and ``[initial]`` (``[sensing]`` has a module of its own, :mod:`.sensing_config`).
 """
 
 from __future__ import annotations
@@ -9,8 +9,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, model_validator
 
 from ..errors import ConfigError, did_you_mean
-from ..model import MeasurementNoise, RobotParams, Sensing, WheelDisturbance
-from ..robots import RobotPreset
+from ..model import MeasurementNoise, RobotParams, WheelDisturbance
 from ._base import (
     MAX_CONTROL_PERIODS,
     MAX_SEED,
@@ -399,140 +398,6 @@ class NoiseConfig(_Section):
     def build(self) -> MeasurementNoise:
         p, h = self.position_std, self.heading_std
         return MeasurementNoise(std=(p, p, h, self.velocity_std, self.yaw_rate_std))
-
-
-# --- [sensing] -------------------------------------------------------------------------------
-
-
-class SensingConfig(_Section):
-    """Latency, wheel encoders and odometry between the robot and its controller (model.md §1.9); all off by
-    default. Metrics stay against the true pose."""
-
-    actuation_delay: NonNegative = Field(
-        0.0,
-        le=10.0,
-        description=(
-            "tau_a [s]: the command computed at t_k acts from t_k + tau_a until the next one acts; a fraction of a "
-            "control period splits the period between two commands."
-        ),
-    )
-    measurement_delay: NonNegative = Field(
-        0.0,
-        le=10.0,
-        description=(
-            "tau_m [s], a whole number of control periods: the controller at t_k sees what its sensors read at "
-            "t_k - tau_m."
-        ),
-    )
-    encoder_counts: int = Field(
-        0,
-        ge=0,
-        le=10_000_000,
-        description=(
-            "Counts per wheel revolution of the encoders odometry reads, e.g. 4096 for a TurtleBot3's XL430; "
-            "0: exact wheel angles. Needs odometry = true."
-        ),
-    )
-    odometry: bool = Field(
-        False,
-        description=(
-            "The controller sees the odometry estimate (encoder increments integrated with the [robot] wheel_radius "
-            "and half_axle, whatever [plant] says) instead of the true pose and velocity."
-        ),
-    )
-
-    fix_period: NonNegative = Field(
-        0.0,
-        le=3600.0,
-        description=(
-            "An absolute fix (localisation) every fix_period [s], a whole number of control periods, corrects the "
-            "odometry estimate; 0: none. Needs odometry = true."
-        ),
-    )
-    fix_gain: float = Field(
-        0.5, gt=0.0, le=1.0, description="Weight g of the fix in the blend pose + g (fix - pose); 1: reset to it."
-    )
-    fix_position_std: NonNegative = Field(0.0, description="Noise of the fix on x and y [m].")
-    fix_heading_std: NonNegative = Field(0.0, description="Noise of the fix on theta [rad].")
-
-    heading: Literal["encoders", "gyro"] | None = Field(
-        None,
-        description=(
-            "Where odometry takes each period's turn: 'encoders' (R (dphi_R - dphi_L) / 2L) or 'gyro' (the IMU's "
-            "integrated yaw rate, as a TurtleBot3 does with use_imu); the distance always comes from the encoders. "
-            "Default: the [robot] preset's odometry (gyro on the TurtleBot3s), else encoders. Needs odometry = true."
-        ),
-    )
-    gyro_noise_density: NonNegative | None = Field(
-        None,
-        le=1.0,
-        description=(
-            "The gyro's white rate noise [rad/s/sqrt(Hz)] (its datasheet's rate noise spectral density): a turn over "
-            "T_c is off by density sqrt(T_c) standard deviations. Default: the [robot] preset's gyro."
-        ),
-    )
-    gyro_bias: float | None = Field(
-        None,
-        ge=-1.0,
-        le=1.0,
-        description="The gyro's constant rate bias [rad/s], the heading drifting by bias t. Default: the preset's.",
-    )
-
-    @model_validator(mode="after")
-    def _encoders_feed_odometry(self) -> SensingConfig:
-        for field, what in (
-            ("encoder_counts", "encoders feed"),
-            ("fix_period", "an absolute fix corrects"),
-            ("heading", "the heading source feeds"),
-        ):
-            if getattr(self, field) and not self.odometry:
-                raise FieldError(
-                    field,
-                    f"{what} odometry, and odometry is off: {field} would change nothing",
-                    f"set sensing.odometry = true, or leave {field} out",
-                )
-        return self
-
-    def gyro(self, robot: RobotPreset | None) -> tuple[float, float] | None:
-        """(noise density [rad/s/sqrt(Hz)], bias [rad/s]) of the gyro odometry turns with, given the ``[robot]
-        preset`` ``robot`` (or None); None where the heading comes from the encoders."""
-        chip = None if robot is None else robot.gyro
-        heading = self.heading or ("gyro" if chip is not None else "encoders")
-        if not self.odometry or heading == "encoders":
-            return None
-        density = (
-            self.gyro_noise_density if self.gyro_noise_density is not None else getattr(chip, "noise_density", None)
-        )
-        bias = self.gyro_bias if self.gyro_bias is not None else getattr(chip, "bias", None)
-        if density is None or bias is None:
-            missing = "gyro_noise_density" if density is None else "gyro_bias"
-            raise FieldError(
-                f"sensing.{missing}",
-                "a gyro heading needs its noise density and bias, and [robot] names no preset with a gyro",
-                "give sensing.gyro_noise_density (the datasheet's rate noise spectral density in rad/s/sqrt(Hz)) "
-                "and sensing.gyro_bias [rad/s], 0 for an ideal gyro; or set sensing.heading = 'encoders'",
-            )
-        return float(density), float(bias)
-
-    def build(self, control_period: float, robot: RobotPreset | None = None) -> Sensing | None:
-        """The runtime chain at ``control_period`` [s] for the ``[robot] preset`` ``robot`` (whose gyro odometry
-        may turn with), or None when everything is off (the plant as it is)."""
-        if not (self.actuation_delay or self.measurement_delay or self.odometry):
-            return None
-        gyro = self.gyro(robot)
-        return Sensing(
-            self.actuation_delay,
-            self.measurement_delay,
-            self.encoder_counts,
-            self.odometry,
-            control_period,
-            self.fix_period,
-            self.fix_gain,
-            self.fix_position_std,
-            self.fix_heading_std,
-            gyro is not None,
-            *(gyro or (0.0, 0.0)),
-        )
 
 
 # --- [initial] -------------------------------------------------------------------------------
