@@ -107,20 +107,30 @@ def test_beyond_grip_the_robot_accelerates_at_most_mu_g_times_the_drive_wheels_l
     assert np.all(np.abs(np.asarray(states[:, :, 4:6])) < 1e-12)  # straight: no lateral speed, no yaw
 
 
-def test_a_steady_turn_loads_the_wheels_as_the_closed_forms_say():
-    """A steady circle (v = 0.5 m/s, omega = 1 rad/s held against viscous wheel drag): the floor's lateral force is
-    m v omega, and with d != 0 the wheels are loaded longitudinally by F_Rx = m d omega (v - L omega) / (2 L),
-    F_Lx = -m d omega (v + L omega) / (2 L)."""
-    params = RobotParams(wheel_inertia=0.005, viscous_friction=0.05)
-    plant = slip_plant(params, friction=0.8, caster=CASTER, period=PERIOD, substeps=10)
-    v, omega = 0.5, 1.0
+TURNING = RobotParams(wheel_inertia=0.005, viscous_friction=0.05)  #: held on a circle against viscous wheel drag
+
+
+def steady_turn(height: float = 0.0):
+    """(plant, final state, held torques) of :data:`TURNING` after 4 s on a circle at v = 0.5 m/s, omega = 1 rad/s,
+    held by the no-slip torques: wheel drag plus B_bar^-1 V_bar nu."""
+    params, v, omega = TURNING, 0.5, 1.0
+    plant = slip_plant(params, friction=0.8, caster=CASTER, period=PERIOD, substeps=10, com_height=height)
     m, d, half, radius = params.mass, params.com_offset, params.half_axle, params.wheel_radius
-    # the no-slip torques that hold (v, omega): wheel drag plus B_bar^-1 V_bar nu
     coriolis = np.array([-m * d * omega**2, m * d * omega * v])
     held = 0.05 * np.array([v + half * omega, v - half * omega]) / radius
     held += radius / 2.0 * np.array([[1.0, 1.0 / half], [1.0, -1.0 / half]]) @ coriolis
     torques = jnp.broadcast_to(jnp.asarray(held), (400, 2))
     final = rollout(plant, plant.init(jnp.asarray([0.0, 0.0, 0.0, v, omega])), torques, plant.substeps)[-1]
+    return plant, final, held
+
+
+def test_a_steady_turn_loads_the_wheels_as_the_closed_forms_say():
+    """A steady circle (v = 0.5 m/s, omega = 1 rad/s held against viscous wheel drag): the floor's lateral force is
+    m v omega, and with d != 0 the wheels are loaded longitudinally by F_Rx = m d omega (v - L omega) / (2 L),
+    F_Lx = -m d omega (v + L omega) / (2 L)."""
+    plant, final, held = steady_turn()
+    params, v, omega = TURNING, 0.5, 1.0
+    m, d, half = params.mass, params.com_offset, params.half_axle
     u, r = float(final[3]), float(final[5])
     assert u == pytest.approx(v, rel=0.02) and r == pytest.approx(omega, rel=0.02)
     assert float(jnp.max(jnp.abs(plant.derivative(final, jnp.asarray(held), jnp.zeros(2))[3:]))) < 1e-3  # steady
@@ -334,17 +344,10 @@ def test_beyond_grip_load_transfer_raises_the_acceleration_to_its_closed_form():
 def test_a_steady_turn_loads_the_outer_wheel():
     """On a steady circle the side force m u r at height h moves m u r h / (2 L) from the inner (left) wheel to the
     outer (right); with h = 0 the loads are the static share, exactly."""
-    params = RobotParams(wheel_inertia=0.005, viscous_friction=0.05)
-    v, omega = 0.5, 1.0
-    m, d, half, radius = params.mass, params.com_offset, params.half_axle, params.wheel_radius
-    coriolis = np.array([-m * d * omega**2, m * d * omega * v])
-    held = 0.05 * np.array([v + half * omega, v - half * omega]) / radius
-    held += radius / 2.0 * np.array([[1.0, 1.0 / half], [1.0, -1.0 / half]]) @ coriolis
-    torques = jnp.broadcast_to(jnp.asarray(held), (400, 2))
+    m, d, half = TURNING.mass, TURNING.com_offset, TURNING.half_axle
     static = m * GRAVITY * (1.0 - d / CASTER) / 2.0
     for height in (0.0, HIGH):
-        plant = slip_plant(params, friction=0.8, caster=CASTER, period=PERIOD, substeps=10, com_height=height)
-        final = rollout(plant, plant.init(jnp.asarray([0.0, 0.0, 0.0, v, omega])), torques, plant.substeps)[-1]
+        plant, final, _ = steady_turn(height)
         right, left = (float(n) for n in plant.normals(final))
         u, r = float(final[3]), float(final[5])
         if height == 0.0:
