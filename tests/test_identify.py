@@ -15,6 +15,7 @@ from ddtrack.errors import ConfigError
 from ddtrack.model.lag import PIONEER_3DX_WITH_LASER
 from ddtrack.ros.messages import header, message, planar_pose, twist, typestore
 from ddtrack.sysid import (
+    LAG,
     SpeedLog,
     body_log,
     excitation_plan,
@@ -27,6 +28,7 @@ from ddtrack.sysid import (
 from ddtrack.sysid.body import equivalent_robot, plant_std
 from ddtrack.sysid.fit import propagated
 from ddtrack.sysid.output_error import WINDOW, cut
+from ddtrack.sysid.schedule import held_at
 
 THETA = np.array(PIONEER_3DX_WITH_LASER)
 PLAN = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=60.0, rate=20.0, seed=0)
@@ -355,3 +357,59 @@ def test_two_readings_that_fit_alike_are_named_with_each_ones_delay():
     assert "instants (delay 0.0753 s)" in note and "interval (delay 0.0501 s)" in note
     assert ambiguous_reading({False: fit(1.00, 0.0753), True: fit(1.05, 0.0501)}) == ()  # told apart: no note
     assert ambiguous_reading({False: fit(np.inf, 0.0), True: fit(1.0, 0.05)}) == ()  # one failed: nothing to compare
+
+
+def test_a_fast_log_is_screened_coarsely_then_on_half_samples_and_finds_the_fine_grids_delay(monkeypatch):
+    from ddtrack.sysid import fit as fitting
+
+    plan = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=20.0, rate=200.0, seed=0)
+    log = lag_log(THETA, plan, seed=0, noise=(0.005, 0.01), delay=0.0625)  # 12.5 samples
+    sent_t, sent = log.inputs()
+    record = fitting.Record(log.t, log.speed, sent_t, sent, fitting.slots_for(log.t, sent_t))
+    fine = fitting.delay_grid(0.5 * float(np.median(np.diff(log.t))), 0.15)
+    costs = [fitting.equation_error(LAG, log.t, held_at(log.t, sent_t, sent, d), log.speed, cost=True) for d in fine]
+    calls = []
+    counted = fitting.equation_error
+    monkeypatch.setattr(fitting, "equation_error", lambda *a, **k: calls.append(1) or counted(*a, **k))
+    assert fitting.screened_delay(LAG, record, 0.15, "log") == fine[int(np.argmin(costs))]
+    assert abs(fine[int(np.argmin(costs))] - 0.0625) <= fine[1] - fine[0]
+    assert len(calls) < len(fine) / 3  # a 10 ms grid, then the half samples around its minima
+
+
+def test_a_rejected_step_keeps_its_jacobian_and_both_readings_share_one_compiled_fit(monkeypatch):
+    from ddtrack.sysid import output_error as oe
+
+    plan = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=30.0, rate=20.0, seed=0)
+    log = lag_log(THETA, plan, seed=3, noise=(0.005, 0.01), delay=0.1)  # whole samples: a corner in the delay
+    events = []  # ("J" or "R", the parameters and delay, the channels' weights)
+    jacobians, simulate = oe._jacobians, oe._residuals
+    record = lambda kind, a: events.append((kind, np.asarray(a[4]).tobytes(), np.asarray(a[-1]).tobytes()))  # noqa: E731
+    monkeypatch.setattr(oe, "_jacobians", lambda *a: record("J", a) or jacobians(*a))
+    monkeypatch.setattr(oe, "_residuals", lambda *a: record("R", a) or simulate(*a))
+    jacobians.clear_cache()
+    simulate.clear_cache()
+    fit = identify_lag(log, max_delay=0.15)
+    linearised = {point for kind, point, _ in events if kind == "J"}
+    assert sum(kind == "R" and point not in linearised for kind, point, _ in events) >= 3  # steps were rejected ...
+    last = None  # ... and none re-linearised where it stood: two Jacobians alike with another point tried between
+    for i, (kind, point, weights) in enumerate(events):
+        if kind == "J":
+            if last is not None and events[last][1:] == (point, weights):
+                assert all(e[1] == point for e in events[last + 1 : i]), "a rejected step re-linearised in place"
+            last = i
+    assert jacobians._cache_size() == simulate._cache_size() == 1  # instants and interval means: one program
+    assert abs(fit.delay - 0.1) < 2 * fit.delay_std + 1e-9
+
+
+def test_the_fit_stops_within_a_hundredth_of_a_standard_error_of_where_a_stricter_one_stops(monkeypatch):
+    from ddtrack.sysid import output_error as oe
+
+    plan = excitation_plan(max_speed=1.2, max_yaw_rate=5.24, duration=30.0, rate=20.0, seed=1)
+    log = lag_log(THETA, plan, seed=4, noise=(0.005, 0.01), delay=0.07)
+    fit = identify_lag(log, max_delay=0.15)
+    monkeypatch.setattr(oe, "STILL", 1e-6)
+    strict = identify_lag(log, max_delay=0.15)
+    assert fit.interval_mean is strict.interval_mean
+    assert np.all(np.abs(fit.params - strict.params) < 0.05 * strict.std), (fit.params - strict.params) / strict.std
+    assert abs(fit.delay - strict.delay) < 0.05 * strict.delay_std
+    assert np.allclose(fit.std, strict.std, rtol=0.02)

@@ -63,14 +63,17 @@ def test_the_motor_model_is_recovered_within_its_reported_uncertainty():
     z_drive, z_armature = [], []
     for seed in range(10):  # 50 seeds are published (bench/identify_motor_coverage.py)
         log = motor_log(truth, MOTOR, *PLAN, noise=(0.002, 0.01), current_noise=0.005, delay=0.02, seed=seed)
-        fit = identify_motor(log, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.02)
-        assert 0.02 - 4 * fit.drive.delay_std <= fit.drive.delay <= 0.02 and fit.armature is not None
+        fit = identify_motor(log, wheel_radius=RADIUS, half_axle=HALF, max_delay=0.04)  # 0.02, a whole sample, inside
+        assert abs(fit.drive.delay - 0.02) <= 4 * fit.drive.delay_std and fit.armature is not None
         z_drive.append((fit.drive.params - drive) / fit.drive.std)
         fitted = np.array([fit.armature.resistance, fit.armature.back_emf])
         z_armature.append((fitted - armature) / np.array(fit.armature.std))
     z = np.concatenate([np.array(z_drive), np.array(z_armature)], axis=1)
     # 70 intervals at a nominal 95 %: below 85 % has probability about 1e-4 if they are right
     assert (np.abs(z) <= 1.96).mean() >= 0.85 and np.all(np.abs(z) < 5), np.round(z, 2)
+    # R_a and k_e each on at least 7 of 10 seeds (fewer: probability about 1e-3): a voltage paired with its current
+    # one sample off at the switches (the fitted delay a little past a whole sample) took k_e's to 4 of 10
+    assert np.all((np.abs(z[:, -2:]) <= 1.96).sum(axis=0) >= 7), np.round(z[:, -2:], 2)
 
 
 def write_log(path, log) -> None:

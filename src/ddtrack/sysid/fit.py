@@ -33,6 +33,9 @@ STIFF_STEP = 0.5
 MIN_SAMPLES = 80
 #: [s] how far the screening looks for speeds that answer their inputs before they were sent (clocks apart)
 LEAD = 1.0
+#: [s] the screening's coarse grid: a log faster than 100 Hz is screened on it first, then on half samples around
+#: its minima (the equation error's dip at the delay is about as wide as its spans, SPAN)
+SCREEN_STEP = 0.01
 #: [s] the equation error's equations are integrated over spans this long (at least two samples)
 SPAN = 0.05
 
@@ -120,10 +123,14 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
     fits = {}
     substeps = substeps_for(model, start, speed, longest)
     for mean in (False, True):  # both readings of the speeds: instantaneous or interval means
-        fit = output_error(model, record, start, delay, max_delay=max_delay, interval_mean=mean, window=window,
-                           substeps=substeps)  # fmt: skip
-        stiffer = substeps_for(model, fit.params, speed, longest) if np.isfinite(fit.cost) else substeps
-        if stiffer > substeps:  # the fit went where the start's steps are too long: again, from there
+        params, at, steps = start, delay, substeps
+        if mean and np.isfinite(fits[False].cost):  # from the instants' optimum: read as means, h/2 less delay
+            first = fits[False]
+            params, at, steps = first.params, max(first.delay - 0.5 * float(np.median(np.diff(t))), 0.0), first.substeps
+        fit = output_error(model, record, params, at, max_delay=max_delay, interval_mean=mean, window=window,
+                           substeps=steps)  # fmt: skip
+        stiffer = substeps_for(model, fit.params, speed, longest) if np.isfinite(fit.cost) else steps
+        if stiffer > steps:  # the fit went where the start's steps are too long: again, from there
             fit = output_error(model, record, fit.params, fit.delay, max_delay=max_delay, interval_mean=mean,
                                window=window, substeps=stiffer)  # fmt: skip
         fits[mean] = fit
@@ -216,9 +223,18 @@ def screened_delay(model: SpeedModel, record: Record, max_delay: float, source: 
     is refused, since a delay cannot be told from a clock offset."""
     t, speed, sent_t, sent, _ = record
     step = 0.5 * min(float(np.median(np.diff(t))), float(np.median(np.diff(sent_t))) if sent_t.size > 1 else np.inf)
-    delays = np.concatenate([-np.arange(1, int(LEAD / step) + 1)[::-1] * step, np.arange(0.0, max_delay + 1e-12, step)])
-    costs = np.array([equation_error(model, t, held_at(t, sent_t, sent, d), speed, cost=True) for d in delays])
+    delays = delay_grid(step, max_delay)
     ahead = delays < 0
+    costs = np.full(delays.size, np.inf)
+
+    def screen(indices: np.ndarray) -> None:
+        for i in indices[~np.isfinite(costs[indices])]:
+            costs[i] = equation_error(model, t, held_at(t, sent_t, sent, delays[i]), speed, cost=True)
+
+    ratio = max(1, int(SCREEN_STEP / step))  # a fast log is screened coarsely first, then finely around the minima
+    screen(np.flatnonzero((np.arange(delays.size) - ahead.sum()) % ratio == 0))
+    for i in (int(np.argmin(costs)), int(np.argmin(np.where(ahead, np.inf, costs)))):
+        screen(np.arange(max(0, i - ratio + 1), min(delays.size, i + ratio)))
     best = int(np.argmin(costs))
     behind = int(np.argmin(np.where(ahead, np.inf, costs)))
     interval = float(np.median(np.diff(t)))
@@ -231,6 +247,11 @@ def screened_delay(model: SpeedModel, record: Record, max_delay: float, source: 
             "robot's with chrony or NTP), or record a bag, whose receive times let identify measure the offset",
         )
     return float(min(delays[behind], max_delay))
+
+
+def delay_grid(step: float, max_delay: float) -> np.ndarray:
+    """The delays the screening can choose [s]: multiples of ``step`` from -LEAD to ``max_delay``."""
+    return np.concatenate([-np.arange(1, int(LEAD / step) + 1)[::-1] * step, np.arange(0.0, max_delay + 1e-12, step)])
 
 
 def equation_error(

@@ -33,6 +33,9 @@ from .fit import SpeedFit, SpeedLog, SpeedModel, identify, propagated, simulate
 from .schedule import held_at
 
 NAMES = ("kA_v", "kA_md", "kA_w", "kV", "kS")
+#: standard errors of the fitted delay within which a switch leaves a sample's voltage unknown (the armature fit
+#: pairs each current with the voltage in force at its stamp; one step off there reads a 12 V swing as noise)
+UNSURE = 3.0
 
 
 def motor_model(*, wheel_radius: float, half_axle: float, friction_smoothing: float = 0.01) -> SpeedModel:
@@ -112,7 +115,8 @@ def identify_motor(
     max_delay: float = 0.3,
 ) -> MotorFit:
     """The drivetrain constants and voltage delay of the robot that recorded ``log``; with its currents, R_a and
-    k_e (the voltages taken at the same delay as the motion's)."""
+    k_e (the voltages taken at the same delay as the motion's; samples whose voltage a switch within UNSURE of the
+    delay's standard errors leaves in doubt are left out)."""
     model = motor_model(wheel_radius=wheel_radius, half_axle=half_axle, friction_smoothing=friction_smoothing)
     drive = identify(model, log.speeds, max_delay=max_delay)
     if log.current is None:
@@ -120,13 +124,15 @@ def identify_motor(
     t = np.asarray(log.speeds.t, dtype=float)
     sent = log.speeds.inputs()
     voltage = held_at(t, *sent, drive.delay)
+    margin = UNSURE * drive.delay_std  # a sample this near a switch may have had either voltage: it is left out
+    known = np.all(held_at(t, *sent, drive.delay - margin) == held_at(t, *sent, drive.delay + margin), axis=1)
     measured = np.asarray(log.speeds.speed, dtype=float)
     predicted = simulate(model, drive.params, t, None, measured[0], False, drive.substeps, sent=sent, delay=drive.delay)
     wheels = [
-        np.column_stack(wheel_speeds(s[:, 0], s[:, 1], wheel_radius=wheel_radius, half_axle=half_axle))
+        np.column_stack(wheel_speeds(s[:, 0], s[:, 1], wheel_radius=wheel_radius, half_axle=half_axle))[known]
         for s in (measured, predicted)
     ]
-    return MotorFit(drive, armature_fit(voltage, np.asarray(log.current, dtype=float), *wheels))
+    return MotorFit(drive, armature_fit(voltage[known], np.asarray(log.current, dtype=float)[known], *wheels))
 
 
 def drive_constants(robot: RobotParams, motor: DCMotor) -> np.ndarray:

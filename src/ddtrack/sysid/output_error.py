@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .schedule import CORNER, Schedule, schedule, simulate_schedule
+from .schedule import CORNER, Schedule, nearest_corner, schedule, simulate_schedule
 
 if TYPE_CHECKING:
     from .fit import SpeedModel
@@ -23,6 +23,10 @@ if TYPE_CHECKING:
 SUBSTEPS = 4  #: RK4 steps per segment at least (a lag of 5 samples is integrated to 1e-6)
 #: [s] output-error window: 7 of the slowest lag we fit (0.3 s), so most of it answers commands, not its free start
 WINDOW = 2.0
+#: the fit ends where the Gauss-Newton step would move every parameter (and the delay) by less than this many of its
+#: standard errors: the statistics cannot see what is left. The first pass only sets the channels' weights (their
+#: residual spreads, which a tenth of a standard error leaves unchanged)
+STILL, STILL_FIRST = 0.01, 0.1
 
 
 class Windows(NamedTuple):
@@ -76,7 +80,7 @@ def _window_residuals(rate, interval_mean, substeps, free, params, delay, weight
     return ((simulated - measured) / weights * mask[:, None]).ravel()
 
 
-@partial(jax.jit, static_argnums=(0, 1, 2, 3))
+@partial(jax.jit, static_argnums=(0, 2, 3))
 def _residuals(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask, weights):
     """Every window's residuals, (k, 2 m), the windows simulated side by side."""
 
@@ -88,7 +92,7 @@ def _residuals(rate, interval_mean, substeps, free, params, delay, starts, sched
     return jax.vmap(one)(starts, scheduled, measured, mask)
 
 
-@partial(jax.jit, static_argnums=(0, 1, 2, 3))
+@partial(jax.jit, static_argnums=(0, 2, 3))
 def _jacobians(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask, weights):
     """Each window's exact Jacobian (forward mode through its simulation) on the parameters (the delay last when
     free), (k, 2 m, p), and on its own start, (k, 2 m, 2): a window's residuals depend on no other window's start."""
@@ -130,6 +134,44 @@ def lm_step(
     delta = np.linalg.solve(s, -g_params + np.einsum("kij,kj->i", bd, g_starts))
     starts = -np.linalg.solve(d, (g_starts + np.einsum("kji,j->ki", b, delta))[..., None])[..., 0]
     return np.concatenate([delta, starts.ravel()])
+
+
+def standard_errors(blocks: tuple[np.ndarray, np.ndarray, np.ndarray], r: np.ndarray, dof: int) -> np.ndarray:
+    """The parameters' standard errors at the current linearisation, sqrt(diag(S^-1) |r|^2 / dof), to judge a
+    step by (inf where S is singular, so no step is judged small by them)."""
+    try:
+        inverse = np.linalg.pinv(schur(*blocks)[0])
+    except np.linalg.LinAlgError:
+        return np.full(len(blocks[0]), np.inf)
+    return np.sqrt(np.clip(np.diag(inverse), 0.0, None) * float(r @ r) / max(dof, 1))
+
+
+def negligible(linearised: tuple, still: float, n_params: int) -> bool:
+    """Whether the undamped (Gauss-Newton) step from this linearisation moves every parameter by at most ``still``
+    of its standard error: converged. (A damped step is short for its damping, not for being near the minimum.)"""
+    blocks, gradient, std = linearised
+    try:
+        step = lm_step(blocks, *gradient, 0.0)[:n_params]
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.abs(step) <= still * std))
+
+
+def crossing(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, before: float, after: float) -> float | None:
+    """The corner (:func:`ddtrack.sysid.schedule.nearest_corner` of ``before``) a step of the delay from ``before``
+    to ``after`` [s] crossed or landed on, else None."""
+    corner = nearest_corner(t, sent_t, sent, before)
+    return corner if (before - corner) * (after - corner) <= 0.0 and before != corner else None
+
+
+def holding(blocks: tuple[np.ndarray, np.ndarray, np.ndarray], gradient: tuple[np.ndarray, np.ndarray], i: int):
+    """The normal equations with parameter ``i`` held where it is: its row and column of J^T J a unit's, its
+    gradient 0, so the step leaves it and solves the others given it."""
+    a, b, d = blocks
+    a, b, g = a.copy(), b.copy(), gradient[0].copy()
+    a[i, :], a[:, i], b[:, i, :], g[i] = 0.0, 0.0, 0.0, 0.0
+    a[i, i] = 1.0
+    return (a, b, d), (g, gradient[1])
 
 
 class OutputError(NamedTuple):
@@ -209,17 +251,28 @@ def output_error(
     if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # no fit from here
         return _failed(q[:n_model], count, substeps, delay)
     logged = windows.mask.ravel() > 0
-    for _ in range(2):  # fit, re-weight each channel by its residual spread, fit again
+    dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
+    for still in (STILL_FIRST, STILL):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
-        damping, r = 1e-3, residual_fn(q, weights)
+        damping, r, linearised, std = 1e-3, residual_fn(q, weights), None, np.full(n_params, np.inf)
+        crossed = pinned = None  # the corner the last step crossed; the delay held at a corner it bounced across
         for _ in range(iterations):
-            j_params, j_starts = jacobian_fn(q, weights)
-            if not (np.all(np.isfinite(j_params)) and np.all(np.isfinite(j_starts))):
-                break  # the tangents blew up (a stiff model beyond MAX_SUBSTEPS): no step from here
-            rows = r.reshape(count, -1)
-            gradient = np.einsum("kri,kr->i", j_params, rows), np.einsum("kri,kr->ki", j_starts, rows)
+            if linearised is None:  # a rejected step leaves q, so its Jacobian stands
+                j_params, j_starts = jacobian_fn(q, weights)
+                if not (np.all(np.isfinite(j_params)) and np.all(np.isfinite(j_starts))):
+                    break  # the tangents blew up (a stiff model beyond MAX_SUBSTEPS): no step from here
+                rows = r.reshape(count, -1)
+                blocks = normal_blocks(j_params, j_starts)
+                gradient = np.einsum("kri,kr->i", j_params, rows), np.einsum("kri,kr->ki", j_starts, rows)
+                linearised = blocks, gradient, standard_errors(blocks, r, dof)
+                if pinned is not None:
+                    blocks, gradient = holding(blocks, gradient, n_model)
+                    linearised = blocks, gradient, linearised[2]
+                if negligible(linearised, still, n_params):
+                    break
+            blocks, gradient, std = linearised
             try:
-                trial = q + lm_step(normal_blocks(j_params, j_starts), *gradient, damping)
+                trial = q + lm_step(blocks, *gradient, damping)
             except np.linalg.LinAlgError:  # a window's start no longer moves its samples: damp more
                 trial = np.full_like(q, np.nan)
             if free and np.isfinite(trial[n_model]):
@@ -228,7 +281,15 @@ def output_error(
                 r_trial = residual_fn(trial, weights)
                 if np.all(np.abs(r_trial) < 1e150) and r_trial @ r_trial < r @ r:  # a diverged trial is no step
                     shrink = (r @ r - r_trial @ r_trial) / max(r @ r, 1e-300)
-                    q, r, damping = trial, r_trial, max(damping / 3.0, 1e-9)
+                    corner = crossing(t, sent_t, sent, q[n_model], trial[n_model]) if free and not pinned else None
+                    bounced = corner is not None and crossed is not None and abs(corner - crossed) < CORNER
+                    if bounced:  # back across the corner the last step crossed: try the corner itself
+                        at = trial.copy()
+                        at[n_model] = corner
+                        r_at = residual_fn(at, weights)
+                        if r_at @ r_at <= r_trial @ r_trial:
+                            trial, r_trial, pinned = at, r_at, corner
+                    q, r, damping, linearised, crossed = trial, r_trial, max(damping / 3.0, 1e-9), None, corner
                     if shrink < 1e-12:
                         break
                     continue
@@ -242,7 +303,6 @@ def output_error(
     fitted_delay = float(q[n_model]) if free else delay
     if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):
         return _failed(q[:n_model], count, substeps, fitted_delay)
-    dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     try:
         s, _ = schur(*normal_blocks(*jacobians))
         covariance = np.linalg.pinv(s) * float(r @ r) / max(dof, 1)

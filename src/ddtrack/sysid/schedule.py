@@ -56,6 +56,19 @@ def held_at(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, delay: float) -
     return sent[in_force(t, sent_t, delay)]
 
 
+def nearest_corner(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, delay: float) -> float:
+    """The delay nearest ``delay`` [s] at which an input that changes what is in force takes over exactly on a
+    measurement stamp (NaN if none changes): the simulated speeds have a corner in the delay there, and where the
+    two streams' stamps are aligned every switch has its corner at the same delay, often the fit's minimum."""
+    changes = sent_t[1:][np.any(sent[1:] != sent[:-1], axis=1)]
+    if changes.size == 0:
+        return float("nan")
+    acting = changes + delay
+    k = np.clip(np.searchsorted(t, acting), 1, t.size - 1)
+    gaps = np.concatenate([t[k] - acting, t[k - 1] - acting])
+    return float(delay + gaps[np.argmin(np.abs(gaps))])
+
+
 def schedule(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, delay: float, slots: int) -> Schedule:
     """The segments of every interval between the measurement stamps ``t`` for inputs ``sent`` stamped ``sent_t``,
     each acting ``delay`` [s] after its stamp. An input that acts exactly at t_k is in force at t_k (no
@@ -98,13 +111,13 @@ def simulate_schedule(rate, params, delay, start, scheduled, interval_mean, subs
 
         after, areas = jax.lax.scan(segment, speed, (lengths, inputs))
         mean = jnp.where(h_all > 0, areas.sum(axis=0) / jnp.where(h_all > 0, h_all, 1.0), after)
-        return after, mean if interval_mean else after
+        return after, jnp.where(interval_mean, mean, after)  # a select, not a branch: one program serves both readings
 
     _, speeds = jax.lax.scan(interval, start, scheduled)
     return jnp.concatenate([start[None], speeds])
 
 
-@partial(jax.jit, static_argnums=(0, 5, 6))
+@partial(jax.jit, static_argnums=(0, 6))
 def simulate_jit(rate, params, delay, start, scheduled, interval_mean, substeps):
-    """:func:`simulate_schedule`, compiled once per model, reading and substep count."""
+    """:func:`simulate_schedule`, compiled once per model and substep count (the reading is traced)."""
     return simulate_schedule(rate, params, delay, start, scheduled, interval_mean, substeps)
