@@ -11,7 +11,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -70,11 +75,38 @@ def fits():
     }
 
 
+def cli_runs() -> list[float]:
+    """Wall seconds of two ``ddtrack identify`` processes on the motor log, a fresh compilation cache between them."""
+    volts = reversing_steps(amplitude=6.0, duration=DURATION, rate=RATE, seed=0)
+    log = motor_log(ROBOT, MOTOR, *volts, noise=(0.002, 0.01), current_noise=0.005, delay=0.02, seed=0)
+    with tempfile.TemporaryDirectory() as folder:
+        table = Path(folder) / "log.csv"
+        columns = np.column_stack([log.speeds.t, log.speeds.command, log.speeds.speed, log.current])
+        header = "t [s],u_r [V],u_l [V],v [m/s],omega [rad/s],i_r [A],i_l [A]"
+        np.savetxt(table, columns, delimiter=",", header=header, comments="", fmt="%.17g")
+        command = [sys.executable, "-m", "ddtrack", "identify", str(table), "--model", "motor", "--mass", "1.3",
+                   "--wheel-radius", "0.033", "--half-axle", "0.08", "--out", str(Path(folder) / "motor.toml"),
+                   "--overwrite"]  # fmt: skip
+        environment = os.environ | {"DDTRACK_CACHE_DIR": str(Path(folder) / "cache")}
+        seconds = []
+        for _ in range(2):
+            start = time.perf_counter()
+            subprocess.run(command, env=environment, check=True, capture_output=True)
+            seconds.append(time.perf_counter() - start)
+    return seconds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--cli", action="store_true", help="time two ddtrack identify processes on the motor log")
     args = parser.parse_args()
     enable_float64()
+    if args.cli:
+        first, second = cli_runs()
+        summary = f"ddtrack identify --model motor: first process {first:.1f} s, second (cache warm) {second:.1f} s"
+        print(json.dumps({"first_process": first, "second_process": second}) if args.json else summary)
+        return
     results = {}
     for name, fit in fits().items():
         (cold_wall, cold_cpu), (warm_wall, warm_cpu) = fit(0), fit(1)

@@ -120,7 +120,7 @@ def identify(model: SpeedModel, log: SpeedLog, *, max_delay: float = 0.3, window
     delay = screened_delay(model, record, max_delay, log.source)
     longest = float(np.diff(t).max())
     start = np.asarray(equation_error(model, record.t, held_at(record.t, sent_t, sent, delay), record.speed))
-    fits = {}
+    fits: dict[bool, OutputError] = {}
     substeps = substeps_for(model, start, speed, longest)
     for mean in (False, True):  # both readings of the speeds: instantaneous or interval means
         params, at, steps = start, delay, substeps

@@ -146,7 +146,11 @@ def standard_errors(blocks: tuple[np.ndarray, np.ndarray, np.ndarray], r: np.nda
     return np.sqrt(np.clip(np.diag(inverse), 0.0, None) * float(r @ r) / max(dof, 1))
 
 
-def negligible(linearised: tuple, still: float, n_params: int) -> bool:
+Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]  #: J^T J's blocks A, B, D (:func:`normal_blocks`)
+Gradient = tuple[np.ndarray, np.ndarray]  #: J^T r on the parameters and on each window's start
+
+
+def negligible(linearised: tuple[Blocks, Gradient, np.ndarray], still: float, n_params: int) -> bool:
     """Whether the undamped (Gauss-Newton) step from this linearisation moves every parameter by at most ``still``
     of its standard error: converged. (A damped step is short for its damping, not for being near the minimum.)"""
     blocks, gradient, std = linearised
@@ -164,7 +168,7 @@ def crossing(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, before: float,
     return corner if (before - corner) * (after - corner) <= 0.0 and before != corner else None
 
 
-def holding(blocks: tuple[np.ndarray, np.ndarray, np.ndarray], gradient: tuple[np.ndarray, np.ndarray], i: int):
+def holding(blocks: Blocks, gradient: Gradient, i: int) -> tuple[Blocks, Gradient]:
     """The normal equations with parameter ``i`` held where it is: its row and column of J^T J a unit's, its
     gradient 0, so the step leaves it and solves the others given it."""
     a, b, d = blocks
@@ -254,7 +258,8 @@ def output_error(
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     for still in (STILL_FIRST, STILL):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
-        damping, r, linearised, std = 1e-3, residual_fn(q, weights), None, np.full(n_params, np.inf)
+        damping, r, std = 1e-3, residual_fn(q, weights), np.full(n_params, np.inf)
+        linearised: tuple[Blocks, Gradient, np.ndarray] | None = None  # J^T J, J^T r and the standard errors at q
         crossed = pinned = None  # the corner the last step crossed; the delay held at a corner it bounced across
         for _ in range(iterations):
             if linearised is None:  # a rejected step leaves q, so its Jacobian stands
