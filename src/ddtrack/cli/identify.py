@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import click
 
 from ..errors import ConfigError
-from . import cli, overwrite_option
+from . import cli, enable_compilation_cache, overwrite_option
 
 if TYPE_CHECKING:
     from ..robots import RobotPreset
@@ -214,6 +214,7 @@ def identify(
         if out.suffix.lower() != ".toml":
             raise ConfigError("--out", f"'{out}' is not a .toml file", "give FILE.toml")
         check_target(out, overwrite=overwrite, option="--out")
+    enable_compilation_cache()  # the fit's programs take seconds to compile; a second log of the shape loads them
     if model != "lag" or speeds == "joints":
         radius, half = _geometry(preset, wheel_radius, half_axle)
     if model == "motor":
