@@ -67,10 +67,11 @@ def no_persistent_cache_in_this_process():
     tests that start ``ddtrack`` as a subprocess (test_readme, test_nothing_lost, ...) still use the cache."""
     import ddtrack.cli
     import ddtrack.cli.bench
+    import ddtrack.cli.identify
     import ddtrack.cli.studies
 
     with pytest.MonkeyPatch.context() as patch:
-        for module in (ddtrack.cli, ddtrack.cli.bench, ddtrack.cli.studies):
+        for module in (ddtrack.cli, ddtrack.cli.bench, ddtrack.cli.identify, ddtrack.cli.studies):
             patch.setattr(module, "enable_compilation_cache", lambda: None)
         yield
 
