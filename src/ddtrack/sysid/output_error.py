@@ -106,7 +106,11 @@ def _jacobians(rate, interval_mean, substeps, free, params, delay, starts, sched
     return jax.vmap(one)(starts, scheduled, measured, mask)
 
 
-def normal_blocks(j_params: np.ndarray, j_starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]  #: J^T J's blocks A, B, D (:func:`normal_blocks`)
+Gradient = tuple[np.ndarray, np.ndarray]  #: J^T r on the parameters and on each window's start
+
+
+def normal_blocks(j_params: np.ndarray, j_starts: np.ndarray) -> Blocks:
     """J^T J of all windows stacked, in its blocks [[A, B], [B^T, diag(D_1 .. D_k)]]: A = sum_i Jp_i^T Jp_i (p, p),
     B_i = Jp_i^T Js_i (k, p, 2), D_i = Js_i^T Js_i (k, 2, 2); the starts of two windows never meet."""
     a = np.einsum("kri,krj->ij", j_params, j_params)
@@ -121,9 +125,7 @@ def schur(a: np.ndarray, b: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.n
     return a - np.einsum("kij,klj->il", bd, b), bd
 
 
-def lm_step(
-    blocks: tuple[np.ndarray, np.ndarray, np.ndarray], g_params: np.ndarray, g_starts: np.ndarray, damping: float
-) -> np.ndarray:
+def lm_step(blocks: Blocks, g_params: np.ndarray, g_starts: np.ndarray, damping: float) -> np.ndarray:
     """The Levenberg-Marquardt step (J^T J + damping diag(J^T J)) delta = -J^T r, solved in blocks: for
     the parameters (S delta_p = -g_p + sum_i B_i D_i^-1 g_i, S of the damped blocks), then each window's start,
     delta_i = -D_i^-1 (g_i + B_i^T delta_p); g = J^T r split the same way."""
@@ -136,18 +138,19 @@ def lm_step(
     return np.concatenate([delta, starts.ravel()])
 
 
-def standard_errors(blocks: tuple[np.ndarray, np.ndarray, np.ndarray], r: np.ndarray, dof: int) -> np.ndarray:
-    """The parameters' standard errors at the current linearisation, sqrt(diag(S^-1) |r|^2 / dof), to judge a
-    step by (inf where S is singular, so no step is judged small by them)."""
+def covariance(blocks: Blocks, r: np.ndarray, dof: int) -> np.ndarray:
+    """The parameters' block of the Gauss-Newton covariance, S^-1 |r|^2 / dof (raises where S cannot be
+    inverted)."""
+    return np.linalg.pinv(schur(*blocks)[0]) * float(r @ r) / max(dof, 1)
+
+
+def standard_errors(blocks: Blocks, r: np.ndarray, dof: int) -> np.ndarray:
+    """The parameters' standard errors at the current linearisation, to judge a step by (inf where S is
+    singular, so no step is judged small by them)."""
     try:
-        inverse = np.linalg.pinv(schur(*blocks)[0])
+        return np.sqrt(np.clip(np.diag(covariance(blocks, r, dof)), 0.0, None))
     except np.linalg.LinAlgError:
         return np.full(len(blocks[0]), np.inf)
-    return np.sqrt(np.clip(np.diag(inverse), 0.0, None) * float(r @ r) / max(dof, 1))
-
-
-Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]  #: J^T J's blocks A, B, D (:func:`normal_blocks`)
-Gradient = tuple[np.ndarray, np.ndarray]  #: J^T r on the parameters and on each window's start
 
 
 def negligible(linearised: tuple[Blocks, Gradient, np.ndarray], still: float, n_params: int) -> bool:
@@ -258,7 +261,7 @@ def output_error(
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     for still in (STILL_FIRST, STILL):  # fit, re-weight each channel by its residual spread, fit again
         weights = jnp.asarray(spread)
-        damping, r, std = 1e-3, residual_fn(q, weights), np.full(n_params, np.inf)
+        damping, r = 1e-3, residual_fn(q, weights)
         linearised: tuple[Blocks, Gradient, np.ndarray] | None = None  # J^T J, J^T r and the standard errors at q
         crossed = pinned = None  # the corner the last step crossed; the delay held at a corner it bounced across
         for _ in range(iterations):
@@ -275,7 +278,7 @@ def output_error(
                     linearised = blocks, gradient, linearised[2]
                 if negligible(linearised, still, n_params):
                     break
-            blocks, gradient, std = linearised
+            blocks, gradient, _ = linearised
             try:
                 trial = q + lm_step(blocks, *gradient, damping)
             except np.linalg.LinAlgError:  # a window's start no longer moves its samples: damp more
@@ -286,7 +289,7 @@ def output_error(
                 r_trial = residual_fn(trial, weights)
                 if np.all(np.abs(r_trial) < 1e150) and r_trial @ r_trial < r @ r:  # a diverged trial is no step
                     shrink = (r @ r - r_trial @ r_trial) / max(r @ r, 1e-300)
-                    corner = crossing(t, sent_t, sent, q[n_model], trial[n_model]) if free and not pinned else None
+                    corner = crossing(t, sent_t, sent, q[n_model], trial[n_model]) if free and pinned is None else None
                     bounced = corner is not None and crossed is not None and abs(corner - crossed) < CORNER
                     if bounced:  # back across the corner the last step crossed: try the corner itself
                         at = trial.copy()
@@ -309,13 +312,12 @@ def output_error(
     if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):
         return _failed(q[:n_model], count, substeps, fitted_delay)
     try:
-        s, _ = schur(*normal_blocks(*jacobians))
-        covariance = np.linalg.pinv(s) * float(r @ r) / max(dof, 1)
+        full = covariance(normal_blocks(*jacobians), r, dof)
     except np.linalg.LinAlgError:
         return _failed(q[:n_model], count, substeps, fitted_delay)
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    std = np.sqrt(np.clip(np.diag(full), 0.0, None))
     delay_std = float(std[n_model]) if free else 0.0
-    model_block = covariance[:n_model, :n_model]
+    model_block = full[:n_model, :n_model]
     return OutputError(q[:n_model], std[:n_model], cost, spread, count, substeps, model_block, fitted_delay, delay_std)
 
 
