@@ -20,6 +20,7 @@ from ddtrack import pytree_dataclass
 from ddtrack.errors import ConfigError
 from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds
+from ddtrack.model.sensed import QUEUE_BUCKET
 from ddtrack.scenario import build
 from ddtrack.sim import Draws, simulate
 from ddtrack.trajectories import Line
@@ -251,7 +252,9 @@ def test_a_sensed_plant_is_a_plant_with_named_states():
     plant = sensed(DynamicPlant(PARAMS), delay=1.5 * T, measurement=2 * T, odometry=True)
     assert isinstance(plant, SensedPlant) and plant.input_kind == "torque"
     names = plant.state_layout.names
-    assert names[:5] == ("x", "y", "theta", "v", "omega") and len(names) == 5 + 2 + 5 + 2 * 2 + 2 * 5
+    # the inner state, the wheel angles, the estimate, the command queue (1.5 periods: 2 commands, padded to the
+    # queue's least capacity), the measurement line (2 periods)
+    assert names[:5] == ("x", "y", "theta", "v", "omega") and len(names) == 5 + 2 + 5 + QUEUE_BUCKET * 2 + 2 * 5
     assert plant.recorded_layout.names == names[:12]
     x0 = plant.init(jnp.asarray([1.0, 2.0, 0.5, 0.0, 0.0]))
     assert x0.shape == (len(names),)

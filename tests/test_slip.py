@@ -49,7 +49,7 @@ def no_slip_limit():
     runs = {}
     for eps in (1e-2, 1e-3):
         plant = slip_plant(GEARED, friction=5.0, slip_speed=eps, scheme="rosenbrock", substeps=20)
-        assert (plant.scheme, plant.substeps) == ("rosenbrock", 20)
+        assert (plant.scheme, int(plant.substeps)) == ("rosenbrock", 20)
         runs[eps] = (plant, rollout(plant, plant.init(body0), torques, 20))
     return reference, runs
 
@@ -96,7 +96,7 @@ def test_beyond_grip_the_robot_accelerates_at_most_mu_g_times_the_drive_wheels_l
     assert plant.scheme == "rk4"
     levels = jnp.asarray([3.0, 5.0, 10.0])
     torques = levels[:, None, None] * jnp.ones((1, 50, 2))
-    states = jax.vmap(lambda tau: rollout(plant, plant.init(jnp.zeros(5)), tau, plant.substeps))(torques)
+    states = jax.vmap(lambda tau: rollout(plant, plant.init(jnp.zeros(5)), tau, int(plant.substeps)))(torques)
     limit = mu * GRAVITY * (1.0 - GEARED.com_offset / CASTER)
     speed = np.asarray(states[:, :, 3])
     acceleration = np.diff(speed, axis=1) / PERIOD
@@ -120,7 +120,7 @@ def steady_turn(height: float = 0.0):
     held = 0.05 * np.array([v + half * omega, v - half * omega]) / radius
     held += radius / 2.0 * np.array([[1.0, 1.0 / half], [1.0, -1.0 / half]]) @ coriolis
     torques = jnp.broadcast_to(jnp.asarray(held), (400, 2))
-    final = rollout(plant, plant.init(jnp.asarray([0.0, 0.0, 0.0, v, omega])), torques, plant.substeps)[-1]
+    final = rollout(plant, plant.init(jnp.asarray([0.0, 0.0, 0.0, v, omega])), torques, int(plant.substeps))[-1]
     return plant, final, held
 
 
@@ -150,9 +150,9 @@ def test_the_light_wheel_takes_the_rosenbrock_step_and_it_matches_fine_rk4():
     Rosenbrock step, whose 20 sub-steps agree with 400 RK4 sub-steps per period within a micrometre."""
     params = RobotParams(wheel_inertia=0.5 * 0.1 * 0.05**2)
     plant = slip_plant(params, period=PERIOD, substeps=10)
-    assert (plant.scheme, plant.substeps) == ("rosenbrock", 20)
+    assert (plant.scheme, int(plant.substeps)) == ("rosenbrock", 20)
     torques, x0 = wavy_torques(50) * 0.5, plant.init(jnp.zeros(5))
-    implicit = rollout(plant, x0, torques, plant.substeps)
+    implicit = rollout(plant, x0, torques, int(plant.substeps))
     fine = rollout(SlipPlant(params, 0.8, 1e-2, jnp.inf, None, scheme="rk4", substeps=400), x0, torques, 400)
     assert float(jnp.max(jnp.abs(implicit[:, :2] - fine[:, :2]))) < 1e-6
 
@@ -308,7 +308,7 @@ def test_loads_balance_the_moments_about_the_centre_of_mass():
     the wheels' loads and floor forces and of the caster's load cancel, and the three loads carry the weight. Solved
     here for (N_R, N_L, N_caster) from those three equations, apart from the plant's closed form."""
     plant = slip_plant(GEARED, friction=0.8, caster=CASTER, period=PERIOD, substeps=10, com_height=HIGH)
-    states = rollout(plant, plant.init(jnp.zeros(5)), 6.0 * wavy_torques(150), plant.substeps)
+    states = rollout(plant, plant.init(jnp.zeros(5)), 6.0 * wavy_torques(150), int(plant.substeps))
     m, d, half = GEARED.mass, GEARED.com_offset, GEARED.half_axle
     centre = np.array([d, 0.0, HIGH])
     points = np.array([[0.0, -half, 0.0], [0.0, half, 0.0], [CASTER, 0.0, 0.0]]) - centre  # right, left, caster
@@ -334,7 +334,7 @@ def test_beyond_grip_load_transfer_raises_the_acceleration_to_its_closed_form():
     mu = 0.8
     plant = slip_plant(GEARED, friction=mu, caster=CASTER, period=PERIOD, substeps=10, com_height=HIGH)
     torques = 10.0 * jnp.ones((50, 2))
-    speed = np.asarray(rollout(plant, plant.init(jnp.zeros(5)), torques, plant.substeps)[:, 3])
+    speed = np.asarray(rollout(plant, plant.init(jnp.zeros(5)), torques, int(plant.substeps))[:, 3])
     late = (np.diff(speed) / PERIOD)[-10:].mean()
     static = mu * GRAVITY * (1.0 - GEARED.com_offset / CASTER)
     assert late == pytest.approx(static / (1.0 - mu * HIGH / CASTER), rel=0.01)

@@ -84,7 +84,7 @@ def step_response(driver: VelocityDriver, command: float, periods: int = 50, per
     u = jnp.asarray([command, 0.0])
 
     def one(x, _):
-        x_next = plant.advance(x, u, jnp.zeros(2), period, plant.substeps)
+        x_next = plant.advance(x, u, jnp.zeros(2), period, int(plant.substeps))
         return x_next, x_next
 
     x0 = plant.init(jnp.zeros(5))
@@ -143,5 +143,5 @@ def test_under_the_sensing_chain_odometry_drifts_more_on_a_slippery_floor():
         assert result.status_name == "ok"
         columns = ddtrack.timeseries(result)
         drift[mu] = float(np.max(np.hypot(columns["odom_ex"], columns["odom_ey"])))
-        assert setup.plant.inner.substeps == 130
+        assert int(setup.plant.inner.substeps) == 130
     assert drift[0.4] > 3.0 * drift[3.0] > 0.0

@@ -11,9 +11,14 @@ caches once a process holds a given share of its limit: later runs of a released
 from __future__ import annotations
 
 import gc
+import logging
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 MAP_LIMIT_FILE = "/proc/sys/vm/max_map_count"
 OWN_MAPS_FILE = "/proc/self/maps"
+LOWERING_LOGGER = "jax._src.interpreters.pxla"  #: where JAX says it lowers a program for compilation
 RELEASE_AT = 0.5  #: the share of the mapping limit at which compiled programs are released
 
 
@@ -52,3 +57,28 @@ def release_compilations(share: float = RELEASE_AT) -> bool:
     jax.clear_caches()
     gc.collect()  # the executables go with their last Python reference
     return True
+
+
+@contextmanager
+def counting_programs() -> Iterator[Counter[str]]:
+    """Count the programs JAX lowers for compilation inside the block, by name (e.g. ``jit__metric_series``): each
+    is a trace and lower of its own, whether XLA then compiles it or finds it in the persistent cache. A program
+    already held in memory (the same function, structure and shapes) is not lowered again and not counted."""
+    counts: Counter[str] = Counter()
+
+    class Tally(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if record.msg.startswith("Compiling %s"):
+                counts[str(record.args[0])] += 1  # type: ignore[index]
+
+    logger = logging.getLogger(LOWERING_LOGGER)
+    handler, level, propagate = Tally(logging.DEBUG), logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.DEBUG)
+    logger.propagate = False  # the debug lines are for the tally, not for the user's log
+    try:
+        yield counts
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        logger.propagate = propagate

@@ -23,8 +23,9 @@ def rk4_step(f: Callable[[Array], Array], x: Array, h: Array | float) -> Array:
     return rk4_step_timed(lambda _, z: f(z), 0.0, x, h)
 
 
-def rk4(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: int) -> Array:
-    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal RK4 steps (``steps`` is static)."""
+def rk4(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: int | Array) -> Array:
+    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal RK4 steps. A traced ``steps`` makes the loop a
+    ``while_loop`` (one program for every count; forward-mode differentiable only), a Python int a ``scan``."""
     h = duration / steps
     return lax.fori_loop(0, steps, lambda _, z: rk4_step(f, z, h), x)
 
@@ -106,9 +107,10 @@ def rosenbrock2(
     f: Callable[[Array], Array],
     x: Array,
     duration: Array | float,
-    steps: int,
+    steps: int | Array,
     stiff: tuple[int, int] | None = None,
 ) -> Array:
-    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal :func:`rosenbrock2_step` steps (static)."""
+    """Integrate x_dot = f(x) over ``duration`` in ``steps`` equal :func:`rosenbrock2_step` steps (traced or a
+    Python int, as :func:`rk4`'s)."""
     h = duration / steps
     return lax.fori_loop(0, steps, lambda _, z: rosenbrock2_step(f, z, h, stiff), x)

@@ -50,6 +50,16 @@ def _queue_layout(prefix: str, layout: Layout, length: int) -> Layout:
     return Layout(names, layout.units * length)
 
 
+QUEUE_BUCKET = 16  #: the least capacity of a command queue: delays up to 16 periods share one program
+
+
+def queue_capacity(whole: int, fraction: float) -> int:
+    """The commands a queue for a delay of ``whole`` periods and ``fraction`` of one holds: none without a delay,
+    else the next power of two, at least :data:`QUEUE_BUCKET` (the older commands in it are never read)."""
+    needed = whole + (1 if fraction > 0.0 else 0)
+    return 0 if needed == 0 else max(QUEUE_BUCKET, 1 << (needed - 1).bit_length())
+
+
 def _join(*layouts: Layout) -> Layout:
     return Layout(sum((lay.names for lay in layouts), ()), sum((lay.units for lay in layouts), ()))
 
@@ -67,8 +77,12 @@ class SensedPlant:
     true_radius, true_half_axle
         the true R, L [m], with which the wheels turn as the body moves (unless ``inner`` has ``wheel_rates(x)``,
         e.g. a plant whose wheels slip)
-    command_periods, command_fraction
-        the actuation delay tau_a = (k + f) T_c as k (whole periods) and f in [0, 1) (static)
+    command_periods
+        the actuation delay's whole periods k (a number, traced: delays of different lengths share a program)
+    command_fraction
+        its fraction of a period f in [0, 1), tau_a = (k + f) T_c (static: it splits the period's integration)
+    queue_capacity
+        the commands the queue holds, at least k + (1 if f > 0), padded (:func:`queue_capacity`; static)
     measurement_periods
         the measurement delay in whole periods (static)
     encoder_counts
@@ -100,8 +114,9 @@ class SensedPlant:
     gyro_noise_density: Array | float = 0.0
     gyro_bias: Array | float = 0.0
     noise_key: Array | None = None
-    command_periods: int = static_field(default=0)
+    command_periods: Array | int = 0
     command_fraction: float = static_field(default=0.0)
+    queue_capacity: int = static_field(default=0)
     measurement_periods: int = static_field(default=0)
     odometry: bool = static_field(default=False)
     fix_periods: int = static_field(default=0)
@@ -111,8 +126,9 @@ class SensedPlant:
 
     @property
     def queue_length(self) -> int:
-        """Commands waiting: k, and one more when a fraction of a period splits it (the command that acts first)."""
-        return self.command_periods + (1 if self.command_fraction > 0.0 else 0)
+        """The commands the state holds, the latest last: the last k (and one more when a fraction of a period splits
+        it, the command that acts first), padded to :attr:`queue_capacity` with older ones."""
+        return self.queue_capacity
 
     @property
     def clocked(self) -> bool:
@@ -216,9 +232,10 @@ class SensedPlant:
         if self.queue_length == 0:
             return queued, [(u, 1.0)]
         line = jnp.concatenate([queued, u[None]])
+        latest = self.queue_length - jnp.asarray(self.command_periods)  # row of the command sent k periods ago
         if self.command_fraction > 0.0:  # the older command acts first, for the fraction f of the period
-            return line[1:], [(line[0], self.command_fraction), (line[1], 1.0 - self.command_fraction)]
-        return line[1:], [(line[0], 1.0)]
+            return line[1:], [(line[latest - 1], self.command_fraction), (line[latest], 1.0 - self.command_fraction)]
+        return line[1:], [(line[latest], 1.0)]
 
     def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
         """One control period: the queued commands drive the inner plant (the wheels turning with it), then the
@@ -405,8 +422,9 @@ class Sensing:
             like_batch(self.gyro_noise_density),
             like_batch(self.gyro_bias),
             key if drawn else None,
-            command_periods=whole,
+            command_periods=like_batch(whole).astype(int),
             command_fraction=fraction,
+            queue_capacity=queue_capacity(whole, fraction),
             measurement_periods=measured,
             odometry=self.odometry,
             fix_periods=fixes,

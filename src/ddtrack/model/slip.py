@@ -106,8 +106,9 @@ class SlipPlant:
         Height h [m] of the centre of mass above the floor; 0: the static loads, no load transfer.
     scheme : str
         ``"rk4"`` or ``"rosenbrock"`` (static).
-    substeps : int
-        Sub-steps per control period at least (static); the simulator's count is used when larger.
+    substeps : int or Array
+        Sub-steps per control period at least (a number, traced: robots and floors that need different counts share
+        one compiled program); the simulator's count is used when larger.
     """
 
     params: RobotParams
@@ -118,7 +119,7 @@ class SlipPlant:
     pwm_model: DCMotor | None = None
     com_height: Array | float = 0.0
     scheme: str = static_field(default="rk4")
-    substeps: int = static_field(default=1)
+    substeps: Array | int = 1
     state_layout: ClassVar[Layout] = SLIP_STATE
     input_layout: ClassVar[Layout] = WHEEL_TORQUES
     logged_layout: ClassVar[Layout] = SLIP_LOGS
@@ -205,7 +206,7 @@ class SlipPlant:
 
     def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
         """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
-        steps = max(substeps, self.substeps)
+        steps = jnp.maximum(substeps, self.substeps)
 
         def rate(z: Array) -> Array:
             return self.derivative(z, u, tau_dist)
@@ -313,7 +314,8 @@ def slip_plant_model(
         check_drawn(params, l_c)  # a drawn robot too
         mu, eps, held_caster, height = broadcast_like(params, (friction, slip_speed, l_c, com_height))
         motors = broadcast_like(params, motor), broadcast_like(params, pwm_model)
-        return SlipPlant(params, mu, eps, held_caster, *motors, com_height=height, scheme=chosen, substeps=steps)
+        count = jnp.broadcast_to(steps, jnp.shape(params.mass))  # an integer per robot, traced
+        return SlipPlant(params, mu, eps, held_caster, *motors, com_height=height, scheme=chosen, substeps=count)
 
     return plant_model
 

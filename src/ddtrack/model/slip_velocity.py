@@ -50,14 +50,14 @@ class SlipVelocityPlant:
         The PI loop of each wheel and the motor it drives.
     scheme : str
         ``"rk4"`` or ``"rosenbrock"`` (static); the Rosenbrock step is implicit in the velocities and spins.
-    substeps : int
-        Sub-steps per control period at least (static).
+    substeps : int or Array
+        Sub-steps per control period at least (a number, traced, as :class:`~ddtrack.model.slip.SlipPlant`'s).
     """
 
     slip: SlipPlant
     driver: VelocityDriver
     scheme: str = static_field(default="rk4")
-    substeps: int = static_field(default=1)
+    substeps: Array | int = 1
     state_layout: ClassVar[Layout] = SLIP_VELOCITY_STATE
     input_layout: ClassVar[Layout] = VELOCITY_COMMAND
     logged_layout: ClassVar[Layout] = SLIP_VELOCITY_LOGS
@@ -96,7 +96,7 @@ class SlipVelocityPlant:
 
     def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
         """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
-        steps = max(substeps, self.substeps)
+        steps = jnp.maximum(substeps, self.substeps)
 
         def rate(z: Array) -> Array:
             return self.derivative(z, u, tau_dist)
@@ -136,8 +136,9 @@ def slip_velocity_model(
     def plant_model(params: RobotParams) -> SlipVelocityPlant:
         check_drawn(params, l_c)
         mu, eps, held_caster, height = broadcast_like(params, (friction, slip_speed, l_c, com_height))
+        count = jnp.broadcast_to(steps, jnp.shape(params.mass))  # an integer per robot, traced
         # no motor: its torque input is the loop's applied torque
-        slip = SlipPlant(params, mu, eps, held_caster, com_height=height)
-        return SlipVelocityPlant(slip, broadcast_like(params, driver), chosen, steps)
+        slip = SlipPlant(params, mu, eps, held_caster, com_height=height, substeps=count)
+        return SlipVelocityPlant(slip, broadcast_like(params, driver), chosen, count)
 
     return plant_model
