@@ -308,3 +308,23 @@ def test_a_burger_scale_run_prints_its_small_effort_with_significant_digits(tmp_
     assert printed != "0.0" and float(printed) == pytest.approx(effort, rel=5e-3)  # 3 significant digits
     assert len(printed.replace("0.", "", 1).lstrip("0").replace(".", "").split("e")[0]) == 3
     assert "saturated " in stdout and " % of the time" in stdout
+
+
+def test_run_prints_its_summary_before_it_draws_the_figures(cli, capsys, tmp_path, monkeypatch):
+    # the numbers are ready once the run is: a user reads them while the figures are drawn (and a write that then
+    # fails leaves no folder behind)
+    import ddtrack.rundir
+
+    printed = []
+
+    def write_run(stage, *args, **kwargs):
+        printed.append(capsys.readouterr().out)  # what the user has read when the folder starts being written
+        raise OSError("disk full")
+
+    monkeypatch.setattr(ddtrack.rundir, "write_run", write_run)
+    out = tmp_path / "line"
+    short = ["--set", "simulation.duration=2", "--set", "simulation.metric_window=[0, 2]"]
+    code, _, err = cli("run", SCENARIOS / "paper_line.toml", "--out", out, *short)
+    assert code != 0 and "disk full" in err
+    assert printed and printed[0].startswith(f"paper_line: backstepping on line, seed 0, 2 s -> {out}")
+    assert "e_tr over [0, 2] s: mean" in printed[0] and not out.exists()

@@ -23,6 +23,8 @@ from ..precision import enable_float64
 
 if TYPE_CHECKING:
     from ..robots import RobotPreset
+    from ..scenario import Scenario
+    from ..sim import SimResult
 
 LISTS = ("controllers", "plants", "trajectories", "disturbances", "robots")
 
@@ -71,16 +73,13 @@ def run(
     check_output(folder, command="run", overwrite=overwrite)  # before spending time on the simulation
     from ..rundir import write_run
     from ..runner import needs_identification, prepare, run_record, run_setup
-    from ..sim import remedy
 
     show = terminal_status()
     show("identifying the robot: the NN emulator's pre-training run" if needs_identification(spec) else "preparing")
     setup, draws = prepare(spec)
     show(f"simulating {spec.simulation.duration:g} s")
     result = run_setup(spec, setup, draws)
-    show("writing the run folder and its figures")
     columns, metrics = run_record(spec, setup, result)  # with the grip the run needed, and its wheel speeds
-    sim = spec.simulation
     identification = None
     if setup.identification is not None:
         found = setup.identification
@@ -90,14 +89,26 @@ def run(
             "epoch_loss": [float(v) for v in found.epoch_loss],
             "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True)),
         }
+    show("")
+    code = echo_summary(spec, folder, result, columns, metrics)  # before the figures: the numbers are ready now
+    show("writing the run folder and its figures")
     with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
         write_run(stage, spec, columns, metrics, identification)
     show("")
+    return code
+
+
+def echo_summary(spec: Scenario, folder: Path, result: SimResult, columns: dict, metrics: dict) -> int:
+    """Print a finished run's summary (the tracking error, settling, effort; its warnings on stderr); return the
+    command's exit code: 0, or 1 for a run that failed (with the likely cause)."""
+    sim = spec.simulation
     click.echo(
         f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
         f"{sim.duration:g} s -> {folder}"
     )
     if result.status_name != "ok":
+        from ..sim import remedy
+
         cause = remedy(result.status_name, columns, metrics["warnings"])
         for warning in metrics["warnings"]:  # the others: the remedy already says the one it names
             if warning["message"] != cause:
