@@ -79,6 +79,8 @@ def test_tune_command_lowers_the_loss_and_writes_a_fragment(tmp_path, cli):
         (["--controller", "nn_adaptive_backstepping"], "--controller"),
         (["--gamma", "1", "-1", "0"], "--gamma"),
         (["--set", "controller.gains=[1, 0, 1]"], "controller.gains"),
+        # a slip plant's substep loop runs a traced count: no reverse-mode gradient (was a JAX traceback)
+        (["--set", "plant.model=slip", "--set", "plant.wheel_inertia=2e-3"], "plant.model"),
     ],
 )
 def test_tune_bad_input_exits_2_and_writes_nothing(tmp_path, cli, args, field):

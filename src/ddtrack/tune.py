@@ -65,6 +65,9 @@ class TuneResult(NamedTuple):
     final_loss: float
 
 
+UNTUNABLE_PLANTS = ("slip", "slip_velocity")  #: plants whose substep loop runs a traced count (a while loop)
+
+
 def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Problem]:
     """Each training scenario prepared once for all the seeds (one vmapped batch each)."""
     tunable = tunable_kinds()
@@ -74,6 +77,14 @@ def problems(scenarios: Sequence[Scenario], seeds: Sequence[int]) -> list[Proble
                 "--controller",
                 f"'{scenario.controller.kind}' has no tunable gains here",
                 f"tune one of: {', '.join(tunable)}",
+            )
+        if scenario.plant.model in UNTUNABLE_PLANTS:
+            raise ConfigError(
+                "plant.model",
+                f"'{scenario.plant.model}' cannot be tuned through: its integration adapts its steps to the robot "
+                "(a loop whose length is a number), which reverse-mode gradients cannot pass",
+                'tune on the robot\'s identified lag model (plant.model = "lag") or the unicycle, then compare the '
+                "gains on this plant with ddtrack bench --scenario",
             )
     return [
         Problem(scenario, *prepare_batch(scenario, list(seeds)), scenario.divergence_distance())
