@@ -372,3 +372,19 @@ def test_a_batch_and_the_environment_see_the_sensing_chain():
     assert isinstance(env._episode.plant, SensedPlant)
     _, _, terminated, _, _ = env.step(np.zeros(3))
     assert not terminated
+
+
+def test_a_delay_given_directly_gets_a_queue_that_holds_it():
+    # built without the [sensing] section (as a user's script may), a delay of 2 periods still delays: the queue
+    # it needs (16 commands, padded) comes with it; a queue given too short for its delay is refused
+    plant = SensedPlant(DynamicPlant(PARAMS), 0.033, 0.08, 0.033, 0.08, command_periods=2)
+    assert plant.queue_length == QUEUE_BUCKET
+    x = plant.init(jnp.zeros(5))
+    acting = []
+    for k in range(4):  # period k sends (k + 1, k + 1); what acts was sent 2 periods before (the queue starts at 0)
+        u = jnp.full(2, k + 1.0)
+        acting.append(float(plant.stretches(x, u)[1][0][0][0]))
+        x = plant.advance(x, u, jnp.zeros(2), T, 2)
+    assert acting == [0.0, 0.0, 1.0, 2.0]
+    with pytest.raises(ValueError, match="cannot hold a delay of 3 periods"):
+        SensedPlant(DynamicPlant(PARAMS), 0.033, 0.08, 0.033, 0.08, command_periods=3, queue_capacity=2)

@@ -25,6 +25,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
@@ -121,6 +122,17 @@ class SensedPlant:
     odometry: bool = static_field(default=False)
     fix_periods: int = static_field(default=0)
     gyro: bool = static_field(default=False)
+
+    def __post_init__(self) -> None:
+        """A plant built with a delay and no queue for it gets the least queue that holds it (``queue_capacity`` 0:
+        not given); a queue given too short for the delay is refused. (Traced delays are not checked.)"""
+        if isinstance(self.command_periods, jax.core.Tracer):
+            return
+        longest = int(np.max(np.asarray(self.command_periods, dtype=int)))
+        if self.queue_capacity == 0:
+            object.__setattr__(self, "queue_capacity", queue_capacity(longest, self.command_fraction))  # frozen
+        elif self.queue_capacity < longest + (1 if self.command_fraction > 0.0 else 0):
+            raise ValueError(f"a queue of {self.queue_capacity} commands cannot hold a delay of {longest} periods")
 
     # --- layouts ------------------------------------------------------------------------------------------------
 
