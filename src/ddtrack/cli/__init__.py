@@ -90,49 +90,48 @@ def run(
             "nmse": dict(zip(("forward", "lateral", "yaw"), map(float, found.nmse), strict=True)),
         }
     show("")
-    code = echo_summary(spec, folder, result, columns, metrics)  # before the figures: the numbers are ready now
+    summary, notes, code = run_summary(spec, folder, result, columns, metrics)
+    click.echo("\n".join(summary))  # before the figures: the numbers are ready now
     show("writing the run folder and its figures")
     with staged_folder(folder, command="run") as stage:  # the folder holds this run and nothing older
         write_run(stage, spec, columns, metrics, identification)
     show("")
+    for note in notes:  # what the saved numbers may not mean (a write that failed said only why)
+        click.echo(note, err=True)
     return code
 
 
-def echo_summary(spec: Scenario, folder: Path, result: SimResult, columns: dict, metrics: dict) -> int:
-    """Print a finished run's summary (the tracking error, settling, effort; its warnings on stderr); return the
-    command's exit code: 0, or 1 for a run that failed (with the likely cause)."""
+def run_summary(
+    spec: Scenario, folder: Path, result: SimResult, columns: dict, metrics: dict
+) -> tuple[list[str], list[str], int]:
+    """A finished run's summary: (lines for stdout: the tracking error, settling, effort; lines for stderr: its
+    warnings, and for a failed run its likely cause; the command's exit code, 0 or 1 for a failed run)."""
     sim = spec.simulation
-    click.echo(
-        f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, "
-        f"{sim.duration:g} s -> {folder}"
-    )
+    header = f"{spec.name}: {spec.controller.kind} on {spec.trajectory.kind}, seed {sim.seed}, {sim.duration:g} s"
+    header += f" -> {folder}"
+    warnings = [f"warning: {w['message']} [{w['code']}]" for w in metrics["warnings"]]
     if result.status_name != "ok":
         from ..sim import remedy
 
         cause = remedy(result.status_name, columns, metrics["warnings"])
-        for warning in metrics["warnings"]:  # the others: the remedy already says the one it names
-            if warning["message"] != cause:
-                click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
-        click.echo(f"run {result.status_name} at t = {result.failure_time:.2f} s: {cause}", err=True)
-        return 1
+        others = [line for w, line in zip(metrics["warnings"], warnings, strict=True) if w["message"] != cause]
+        return [header], [*others, f"run {result.status_name} at t = {result.failure_time:.2f} s: {cause}"], 1
     window = f"[{sim.window[0]:g}, {sim.window[1]:g}] s"
     settle, effort = metrics["settling_time"], metrics["effort"]  # no effort on a velocity-input (kinematic) plant
     from .._format import percent, significant
 
-    click.echo(
+    errors = (
         f"  e_tr over {window}: mean {significant(metrics['e_tr_mean'])} m, "
         f"rms {significant(metrics['e_tr_rms'])} m, max {significant(metrics['e_tr_max'])} m, "
         f"final {significant(metrics['e_tr_final'])} m"
     )
-    click.echo(
+    effort_line = (
         f"  settling (e_tr < {sim.settling_threshold:g} m): "
         f"{'never' if settle is None else f'{significant(settle)} s'}; "
         f"effort {'none (no torques)' if effort is None else f'{significant(effort)} N^2 m^2 s'}; "
         f"saturated {percent(metrics['saturation_fraction'])} of the time"
     )
-    for warning in metrics["warnings"]:  # the numbers above may not mean what they seem: say why, on stderr
-        click.echo(f"warning: {warning['message']} [{warning['code']}]", err=True)
-    return 0
+    return [header, errors, effort_line], warnings, 0  # the warnings: what the numbers may not mean, on stderr
 
 
 def terminal_status() -> Callable[[str], None]:
