@@ -435,8 +435,7 @@ class Sensing:
             like_batch(self.gyro_bias),
             key if drawn else None,
             command_periods=like_batch(whole).astype(int),
-            command_fraction=fraction,
-            queue_capacity=queue_capacity(whole, fraction),
+            command_fraction=fraction,  # the queue that holds the delay: SensedPlant.__post_init__
             measurement_periods=measured,
             odometry=self.odometry,
             fix_periods=fixes,

@@ -138,7 +138,7 @@ def slip_velocity_model(
         mu, eps, held_caster, height = broadcast_like(params, (friction, slip_speed, l_c, com_height))
         count = jnp.broadcast_to(steps, jnp.shape(params.mass))  # an integer per robot, traced
         # no motor: its torque input is the loop's applied torque
-        slip = SlipPlant(params, mu, eps, held_caster, com_height=height, substeps=count)
+        slip = SlipPlant(params, mu, eps, held_caster, com_height=height, substeps=count)  # batched like the rest
         return SlipVelocityPlant(slip, broadcast_like(params, driver), chosen, count)
 
     return plant_model
