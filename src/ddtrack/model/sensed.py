@@ -115,7 +115,7 @@ class SensedPlant:
     gyro_noise_density: Array | float = 0.0
     gyro_bias: Array | float = 0.0
     noise_key: Array | None = None
-    command_periods: Array | int = 0
+    command_periods: Array | np.ndarray | int = 0
     command_fraction: float = static_field(default=0.0)
     queue_capacity: int = static_field(default=0)
     measurement_periods: int = static_field(default=0)
@@ -125,8 +125,11 @@ class SensedPlant:
 
     def __post_init__(self) -> None:
         """A plant built with a delay and no queue for it gets the least queue that holds it (``queue_capacity`` 0:
-        not given); a queue given too short for the delay is refused. (Traced delays are not checked.)"""
+        not given); a queue given too short for the delay is refused. A traced delay has no value to size a queue by:
+        give its ``queue_capacity`` (a traced one without, split by a fraction of a period, is refused)."""
         if isinstance(self.command_periods, jax.core.Tracer):
+            if self.queue_capacity == 0 and self.command_fraction > 0.0:
+                raise ValueError("a traced actuation delay needs its queue_capacity (see queue_capacity())")
             return
         longest = int(np.max(np.asarray(self.command_periods, dtype=int)))
         if self.queue_capacity == 0:
@@ -434,8 +437,9 @@ class Sensing:
             like_batch(self.gyro_noise_density),
             like_batch(self.gyro_bias),
             key if drawn else None,
-            command_periods=like_batch(whole).astype(int),
-            command_fraction=fraction,  # the queue that holds the delay: SensedPlant.__post_init__
+            command_periods=np.broadcast_to(whole, batch),  # numpy: concrete even where the plant is built traced
+            command_fraction=fraction,
+            queue_capacity=queue_capacity(whole, fraction),  # from the config: a plant built in a trace has no values
             measurement_periods=measured,
             odometry=self.odometry,
             fix_periods=fixes,
