@@ -340,3 +340,32 @@ def test_polyline_path_accepts_borderline_input():
     assert np.count_nonzero(np.asarray(exact.curvatures) == 1.0) == 1
     end = exact(np.pi)  # pi/2 m at 0.5 m/s: the end of the fillet, which is the last waypoint
     np.testing.assert_allclose([float(end.x), float(end.y), float(end.theta)], [1.0, 1.0, np.pi / 2], atol=1e-12)
+
+
+def test_a_switched_trajectory_gives_its_chosen_reference_bit_for_bit():
+    """A study's frame (trajectories.switched): each run carries every kind the study uses and picks its own; the
+    chosen reference is the trajectory's own, to the bit, and a path padded with unreachable segments is unchanged."""
+    from ddtrack.trajectories.switched import pad_path, trajectory_frame
+
+    rounded = square(corner=C0, side=SIDE, speed=V_R, corner_radius=1.0)  # 7 segments
+    sharp = square(corner=C0, side=SIDE, speed=V_R)  # 4
+    eight = FigureEight(size=2.0, period=30.0)
+    assert trajectory_frame([sharp, rounded]) is None  # one kind: the runs keep their own trajectory
+    frame = trajectory_frame([eight, sharp, rounded, eight])
+    assert frame is not None and frame.segments == 7 and len(frame.stand_ins) == 2
+    t = jnp.linspace(0.0, 95.0, 1901)  # across corners and past the first lap (40 s)
+    padded = pad_path(sharp, 7)
+    assert padded.offsets.shape == (7,) and np.isinf(padded.offsets[4:]).all()
+    expected = {name: as_np(evaluate(traj, t)) for name, traj in (("sharp", sharp), ("eight", eight))}
+    for key, values in as_np(evaluate(padded, t)).items():
+        np.testing.assert_array_equal(values, expected["sharp"][key], err_msg=f"padded: {key}")
+    runs = 3  # a batch of runs, as the simulator evaluates a study's trajectories: its own batched, or switched
+    over_runs = jax.jit(jax.vmap(lambda traj, t: jax.vmap(traj)(t), in_axes=(0, None)))
+    for index, (name, traj) in enumerate((("eight", eight), ("sharp", sharp))):  # the frame's order: first seen
+        batch = jax.tree_util.tree_map(lambda leaf: jnp.broadcast_to(leaf, (runs, *jnp.shape(leaf))), traj)
+        switched = frame.place(batch, runs)
+        assert switched.chosen.tolist() == [index] * runs
+        own, chosen = as_np(over_runs(batch, t)), as_np(over_runs(switched, t))
+        np.testing.assert_allclose(own["x"][0], expected[name]["x"], rtol=1e-13)  # the trajectory it is
+        for key, values in own.items():
+            np.testing.assert_array_equal(chosen[key], values, err_msg=f"{name}: {key}")

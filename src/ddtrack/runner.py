@@ -8,11 +8,9 @@ disturbances unchanged (common random numbers).
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
-from pathlib import Path
 from typing import TypeVar
 
 import jax
@@ -22,6 +20,7 @@ from jax import Array
 
 from . import feasibility
 from .adaptation import adaptation_warnings
+from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
 from .compilations import padded_length
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
@@ -35,27 +34,11 @@ from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import check_drive, motor_or_none
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .trajectories import Trajectory
+from .trajectories.switched import TrajectoryFrame
 
 Batched = TypeVar("Batched")
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
-
-
-def enable_compilation_cache() -> None:
-    """Turn on JAX's persistent compilation cache in ``$DDTRACK_CACHE_DIR`` or ``~/.cache/ddtrack/jax``:
-    a second process (a CLI run, a sweep worker) then skips most of the compile. Every compiled function
-    is kept: the run's small random-number jits would otherwise be compiled again each time (0.4 s)."""
-    root = (
-        os.environ.get("DDTRACK_CACHE_DIR")
-        or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
-    )
-    try:
-        cache = Path(root) / "jax"
-        cache.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return  # a read-only home only costs compile time
-    jax.config.update("jax_compilation_cache_dir", str(cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
 
 
 def streams(seed: int) -> dict[str, jax.Array]:
@@ -240,14 +223,21 @@ def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
 
 
 def prepare_batch(
-    scenario: Scenario, seeds: Sequence[int], *, identification: Identification | None = None
+    scenario: Scenario,
+    seeds: Sequence[int],
+    *,
+    identification: Identification | None = None,
+    frame: TrajectoryFrame | None = None,
 ) -> tuple[Setup, Draws]:
     """:func:`prepare` for many seeds, stacked along a leading batch axis; NN emulators are identified
     for all the runs at once (``vmap``), or taken from ``identification``: a batch's emulators already identified
-    for the same plants and seeds (ablations that only change the gain law)."""
+    for the same plants and seeds (ablations that only change the gain law). A study's ``frame`` puts the
+    trajectory among the study's other kinds (:class:`~ddtrack.trajectories.switched.Switched`)."""
     pairs = [prepare(scenario, seed=seed, identify=False) for seed in seeds]
     fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise", "sensing_key")
     setup = dataclasses.replace(pairs[0][0], **{f: stack([getattr(p[0], f) for p in pairs]) for f in fields})
+    if frame is not None:
+        setup = dataclasses.replace(setup, trajectory=frame.place(setup.trajectory, len(seeds)))
     draws = stack([p[1] for p in pairs])
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
@@ -462,6 +452,7 @@ def monte_carlo(
     *,
     chunk_size: int = 64,
     on_chunk: Callable[[int], None] = lambda done: None,
+    frame: TrajectoryFrame | None = None,
 ) -> list[dict]:
     """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
     the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
@@ -478,6 +469,9 @@ def monte_carlo(
         Runs per vmapped batch.
     on_chunk : callable
         Called with the number of runs done after each chunk (a progress bar).
+    frame : TrajectoryFrame, optional
+        A study's trajectory kinds (:func:`~ddtrack.trajectories.switched.trajectory_frame`): its cells on
+        different trajectories then share one program.
 
     Returns
     -------
@@ -490,7 +484,7 @@ def monte_carlo(
     for start in range(0, len(seeds), chunk_size):
         chunk = list(seeds[start : start + chunk_size])
         padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
-        setup, draws = prepare_batch(scenario, padded)
+        setup, draws = prepare_batch(scenario, padded, frame=frame)
         for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):
             plant = {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
             rows.append({"seed": seed, **plant, **metrics})

@@ -19,7 +19,6 @@ import io
 import itertools
 import json
 import math
-import os
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -32,12 +31,14 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from .cluster import cache_on_every_worker
 from .compilations import release_compilations
 from .errors import ConfigError, did_you_mean
 from .metrics import warning_counts
 from .outdir import atomic_write
 from .runner import monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
+from .trajectories.switched import TrajectoryFrame, trajectory_frame
 
 RECORDS = "records"
 ERROR = "error"  #: status of a run whose task raised; such runs are retried when the sweep restarts
@@ -268,14 +269,20 @@ def plan_sweep(sweep: SweepFile, base_dir: Path) -> Plan:
 
 
 def run_chunk(
-    scenario: Scenario, configuration: dict[str, Any], runs: Sequence[tuple[str, int]], chunk: int
+    scenario: Scenario,
+    configuration: dict[str, Any],
+    runs: Sequence[tuple[str, int]],
+    chunk: int,
+    frame: TrajectoryFrame | None = None,
 ) -> list[dict]:
     """The task: simulate ``runs`` ((key, seed) pairs, at most ``chunk``) as one vmapped batch, padded to
-    ``chunk`` runs; return one record per run. An exception becomes error records, not a lost task."""
+    ``chunk`` runs, the trajectory in the study's ``frame``; return one record per run. An exception becomes error
+    records, not a lost task."""
     seeds = [seed for _, seed in runs]
     release_compilations()  # a worker compiles every configuration it runs: stay clear of the mapping limit
     try:
-        rows = monte_carlo(scenario, seeds + [seeds[0]] * (chunk - len(seeds)), chunk_size=chunk)[: len(seeds)]
+        padded = seeds + [seeds[0]] * (chunk - len(seeds))
+        rows = monte_carlo(scenario, padded, chunk_size=chunk, frame=frame)[: len(seeds)]
     except Exception as exc:
         text = "".join(traceback.format_exception_only(exc)).strip()
         return [error_record(key, configuration, seed, text) for key, seed in runs]
@@ -428,13 +435,14 @@ def run_sweep(
         if key not in existing:
             missing.setdefault(index, []).append((key, seed))
     futures = {}
+    frame = trajectory_frame([c.scenario.trajectory.build() for c in plan.configurations])  # one program per kind
     for index, runs in missing.items():
         configuration = plan.configurations[index]
         runs.sort(key=lambda pair: pair[1])
         for start in range(0, len(runs), plan.chunk):
             part = runs[start : start + plan.chunk]
             future = client.submit(
-                run_chunk, configuration.scenario, configuration.describe(), part, plan.chunk, pure=False
+                run_chunk, configuration.scenario, configuration.describe(), part, plan.chunk, frame, pure=False
             )
             futures[future] = (configuration.describe(), part)
     done = len(existing)
@@ -465,30 +473,6 @@ def run_sweep(
         not_ok=sum(r["status"] not in ("ok", ERROR) for r in final.values()),
         warnings=warning_counts([r["metrics"] or {"warnings": []} for r in final.values()]),
     )
-
-
-def cache_on_every_worker(client: Any) -> None:
-    """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
-    (:func:`ddtrack.runner.enable_compilation_cache`) on every worker process of ``client``'s cluster, now and as
-    workers join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
-    settings. A threaded worker in the driver's own process is left alone: that process is its caller's."""
-    from distributed import WorkerPlugin
-
-    class CompilationCache(WorkerPlugin):
-        name = "ddtrack-compilation-cache"
-
-        def __init__(self, driver_pid: int) -> None:
-            self.driver_pid = driver_pid
-
-        def setup(self, worker: Any) -> None:
-            if os.getpid() != self.driver_pid:
-                from ddtrack.precision import enable_float64
-                from ddtrack.runner import enable_compilation_cache
-
-                enable_float64()
-                enable_compilation_cache()
-
-    client.register_plugin(CompilationCache(os.getpid()))
 
 
 __all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep", "run_chunk"]

@@ -330,7 +330,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def enable_compilation_cache() -> None:
     """JAX's persistent compilation cache, imported only by the commands that simulate."""
-    from ..runner import enable_compilation_cache as enable
+    from ..compilations import enable_compilation_cache as enable
 
     enable()
 
