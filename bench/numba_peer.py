@@ -614,11 +614,12 @@ def time_ddtrack(scenario, setup, draws, repeats: int) -> dict:
     """``runner.batch_metrics`` (simulation split over the devices + host metrics) and the split simulation alone."""
     import jax
 
-    from ddtrack.runner import _metric_series, batch_metrics, on_each_device, run_options
+    from ddtrack.runner import _metric_series, batch_metrics, run_options
+    from ddtrack.sim.batch import in_shares
 
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     series = partial(_metric_series, **run_options(scenario))
-    simulate_only = lambda: jax.block_until_ready(on_each_device(series, *runs))  # noqa: E731  # as batch_metrics
+    simulate_only = lambda: jax.block_until_ready(in_shares(series, *runs))  # noqa: E731  # as batch_metrics
     metrics = lambda: batch_metrics(scenario, setup, draws)  # noqa: E731
     start = time.perf_counter()
     metrics()

@@ -155,13 +155,14 @@ def test_mc_shows_a_progress_bar_on_a_terminal(tmp_path):
 
 
 def test_runs_split_over_two_cpu_devices_are_the_same_runs():
-    """``on_each_device`` spreads a chunk over JAX's CPU devices (``ddtrack`` asks for one per core): a subprocess
+    """``in_shares`` splits a chunk into a share per JAX CPU device (``ddtrack`` asks for one per core), each share
+    a thread's, all on the first device (one compiled program for every share): a subprocess
     with two devices must give the rows this one-device process gives, for backstepping and for the NN-adaptive
     law, whose emulators one program partitioned over the two devices trained differently in the last
     bits (with a 5 s, 5-epoch identification as with the paper's 60 s and 100; not with 2 epochs). Both the
     identification and the simulation are split. The first batch runs in a ``with jax.enable_x64(True):`` block
     instead of ``ddtrack.enable_float64()``: the threads that compute the shares take the caller's float64 (they
-    ran in float32, and ``simulate`` refused them, before ``on_each_device`` passed the setting on)."""
+    ran in float32, and ``simulate`` refused them, before ``in_shares`` passed the setting on)."""
     nn = [
         "controller.kind=nn_adaptive_backstepping",
         "simulation.duration=3",
@@ -171,17 +172,17 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     ]
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nfrom ddtrack.runner import monte_carlo, on_each_device\n"
-        "seen = set()\non_each_device(lambda x: seen.update(x.devices()) or x, jax.numpy.zeros(4))\n"
-        "assert len(jax.devices()) == 2 and len(seen) == 2\n"  # the chunk is split: a share on each device
+        "import ddtrack\nfrom ddtrack.runner import monte_carlo, in_shares\n"
+        "seen = []\nin_shares(lambda x: seen.append((x.shape, *x.devices())) or x, jax.numpy.zeros(4))\n"
+        "assert len(jax.devices()) == 2 and seen == [((2,), jax.devices()[0])] * 2, seen\n"  # two shares, one device
         "with jax.enable_x64(True):\n"  # float64 in this thread only
         f"    scenario = ddtrack.load_scenario({str(SCENARIOS / 'figure_eight.toml')!r}, overrides={RANDOM!r})\n"
         "    print(json.dumps(monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4)))\n"
         "ddtrack.enable_float64()\n"
-        "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per device: left unsplit
+        "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per share: left unsplit
         f"nn = ddtrack.load_scenario({str(SCENARIOS / 'paper_line.toml')!r}, overrides={nn!r})\n"
-        "import ddtrack.runner as runner\nsplit, split_runs = [], runner.on_each_device\n"
-        "runner.on_each_device = lambda f, *a: split.append(getattr(f, 'func', f).__name__) or split_runs(f, *a)\n"
+        "import ddtrack.runner as runner\nsplit, split_runs = [], runner.in_shares\n"
+        "runner.in_shares = lambda f, *a: split.append(getattr(f, 'func', f).__name__) or split_runs(f, *a)\n"
         "print(json.dumps(monte_carlo(nn, [0, 1, 2, 3], chunk_size=4)))\n"
         "assert split == ['batched', '_metric_series'], split\n"  # the identification (vmap_runs), the simulation
     )
@@ -193,7 +194,7 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     )
     assert pair == here[:2]
     for a, b in zip(here, sharded, strict=True):
-        assert a == b  # every metric, to the bit: each device simulates its two runs as a batch of two
+        assert a == b  # every metric, to the bit: each share simulates its two runs as a batch of two
     here_nn = monte_carlo(
         ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=nn), [0, 1, 2, 3], chunk_size=4
     )
@@ -201,13 +202,13 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
 
 
 def test_ctrl_c_returns_without_waiting_for_the_shares_still_computing():
-    """A Ctrl-C while the devices compute their shares reaches the caller at once: ``ddtrack mc`` said "aborted"
+    """A Ctrl-C while the threads compute their shares reaches the caller at once: ``ddtrack mc`` said "aborted"
     only once every share had finished (4.8 and 11 s after it, in a 50-run NN identification). Each share here
     waits for the caller to release it; it must see the release, which the old code only gave once the shares had
     given up."""
     script = (
         "import jax, signal, threading, time; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "from ddtrack.runner import on_each_device\n"
+        "from ddtrack.runner import in_shares\n"
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as in a terminal; a background job ignores it
         "main, started = threading.main_thread().ident, threading.Barrier(2)\n"
         "release, released = threading.Event(), []\n"
@@ -217,7 +218,7 @@ def test_ctrl_c_returns_without_waiting_for_the_shares_still_computing():
         "    released.append(release.wait(10))\n"
         "    return x\n"
         "try:\n"
-        "    on_each_device(share, jax.numpy.zeros(4))\n"
+        "    in_shares(share, jax.numpy.zeros(4))\n"
         "except KeyboardInterrupt:\n"
         "    release.set()\n"
         "while len(released) < 2:\n"

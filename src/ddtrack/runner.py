@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from functools import partial
-from typing import TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -29,14 +27,12 @@ from .metrics import lost_path_warnings, summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
 from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
-from .precision import float64_in_this_thread
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import check_drive, motor_or_none
 from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
+from .sim.batch import Batched, in_shares
 from .trajectories import Trajectory
 from .trajectories.switched import TrajectoryFrame
-
-Batched = TypeVar("Batched")
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
 
@@ -188,40 +184,6 @@ def _identifier(scenario: Scenario, setup: Setup) -> Callable[..., Identificatio
     return run_identification
 
 
-def on_each_device(function: Callable[..., Batched], *args: Batched) -> Batched:
-    """``function(*args)`` for a batch of runs (every array's leading axis is the run), the runs split evenly over
-    the available devices (e.g. each CPU core, with ``jax.config.update("jax_num_cpu_devices", n)`` at start-up),
-    each device computing its share as a batch of its own, called from a thread of its own while the others compute
-    theirs (in the caller's float64 setting, a ``with jax.enable_x64(True):`` block included); the results are
-    joined on the host. Left whole on one device, when the runs do not split evenly, or when a device would get a
-    single run (computed as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``).
-    Each share runs the program a batch of its size gets on one device, so each row is the bits that batch gives
-    it (its single run's, below 16 runs per device: docs/reliability.md); one program partitioned over the devices
-    was not, for the NN-adaptive law (its emulator's rows moved in the last bits)."""
-    devices = jax.devices()
-    runs = len(jax.tree_util.tree_leaves(args)[0])
-    if len(devices) == 1 or runs % len(devices) or runs < 2 * len(devices):
-        return function(*args)
-    share = runs // len(devices)
-    host = jax.tree_util.tree_map(np.asarray, args)  # cut on the host: a slice in JAX compiles a program per shape
-    float64 = jax.config.read("jax_enable_x64")  # this thread's: `with jax.enable_x64(True):` holds only in it
-
-    def compute(i: int) -> Batched:
-        rows = slice(i * share, (i + 1) * share)
-        with float64_in_this_thread(float64):
-            part = function(*jax.device_put(jax.tree_util.tree_map(lambda leaf: leaf[rows], host), devices[i]))
-        return jax.tree_util.tree_map(np.asarray, part)
-
-    # a thread per device: called one after another from one thread, the NN identification's shares ran one after
-    # another, no faster than one device (docs/benchmarks.md, "ddtrack mc"); from a thread each, side by side
-    pool = ThreadPoolExecutor(len(devices))
-    try:
-        parts = list(pool.map(compute, range(len(devices))))
-    finally:  # on Ctrl-C, return at once (the shares still computing end unwatched): waiting held `mc` for seconds
-        pool.shutdown(wait=False, cancel_futures=True)
-    return jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *parts)
-
-
 def prepare_batch(
     scenario: Scenario,
     seeds: Sequence[int],
@@ -242,7 +204,7 @@ def prepare_batch(
     if needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
         if identification is None:
-            identification = on_each_device(
+            identification = in_shares(
                 vmap_runs(_identifier(scenario, setup)),
                 setup.plant_params,
                 getattr(setup.controller, "inner", None),
@@ -323,16 +285,26 @@ METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", "sli
 WHEEL_SPINS = ("phidot_r", "phidot_l")
 
 
+def loading_warnings(scenario: Scenario) -> list[dict]:
+    """What loading the scenario found, run or not (:func:`ddtrack.feasibility.check`, the drive's checks): the same
+    for every run of a scenario, so a batch computes it once."""
+    return [*feasibility.check(scenario), *check_drive(scenario)]
+
+
 def run_warnings(
-    scenario: Scenario, columns: dict, metrics: dict, nmse: Array | Sequence[float] | None = None
+    scenario: Scenario,
+    columns: dict,
+    metrics: dict,
+    nmse: Array | Sequence[float] | None = None,
+    loaded: list[dict] | None = None,
 ) -> list[dict]:
     """Why a finished run's numbers may not mean what they seem, each ``{"code", "message"}``: a reference near the
-    clamps (:func:`ddtrack.feasibility.check`), grip no floor could give (:func:`traction_warnings`), and the
-    NN-adaptive controller's adaptation that could not work (:func:`ddtrack.adaptation.adaptation_warnings`;
-    ``nmse``, the emulator's identification NMSE per output, or None)."""
+    clamps (``loaded``: :func:`loading_warnings`, computed if not given), grip no floor could give
+    (:func:`traction_warnings`), and the NN-adaptive controller's adaptation that could not work
+    (:func:`ddtrack.adaptation.adaptation_warnings`; ``nmse``, the emulator's identification NMSE per output, or
+    None)."""
     return [
-        *feasibility.check(scenario),
-        *check_drive(scenario),
+        *(loading_warnings(scenario) if loaded is None else loaded),
         *lost_path_warnings(metrics),
         *traction_warnings(scenario, metrics),
         *motor_warnings(scenario, metrics),
@@ -349,10 +321,11 @@ def run_metrics(
     failure_time: float | None = None,
     nmse: Array | Sequence[float] | None = None,
     lost_path_error: float | None = None,
+    loaded: list[dict] | None = None,
 ) -> dict:
     """``metrics.json`` of one run: :func:`ddtrack.summarize` over the scenario's window, with its warnings; the
-    lost-path bound is the scenario's (:meth:`~ddtrack.scenario.Scenario.lost_path_distance`) unless given (a
-    batch computes it once)."""
+    lost-path bound (:meth:`~ddtrack.scenario.Scenario.lost_path_distance`) and what loading found
+    (:func:`loading_warnings`) are the scenario's unless given (a batch computes them once)."""
     sim = scenario.simulation
     metrics = summarize(
         columns,
@@ -370,11 +343,8 @@ def run_metrics(
         metrics |= motor_metrics(motor, columns, sim.control_period)
     # a failed run's series say nothing about grip or adaptation; what loading found (e.g. an unstable sampled
     # inner loop) still holds, and names the cause
-    metrics["warnings"] = (
-        run_warnings(scenario, columns, metrics, nmse)
-        if status == "ok"
-        else [*feasibility.check(scenario), *check_drive(scenario)]
-    )
+    loaded = loading_warnings(scenario) if loaded is None else loaded
+    metrics["warnings"] = run_warnings(scenario, columns, metrics, nmse, loaded) if status == "ok" else list(loaded)
     return metrics
 
 
@@ -417,13 +387,14 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     sim = scenario.simulation
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     metric_series = partial(_metric_series, **run_options(scenario))
-    series, status, failure_index = jax.tree_util.tree_map(np.asarray, on_each_device(metric_series, *runs))
+    series, status, failure_index = jax.tree_util.tree_map(np.asarray, in_shares(metric_series, *runs))
     e_xy = series.pop("e_xy")
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
     lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
+    loaded = loading_warnings(scenario)  # as is what loading found (22 ms a run, most of a warm mc's time)
     metrics = []
     for i in range(len(status)):
         k = int(failure_index[i])
@@ -441,6 +412,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
                 failure_time=None if k < 0 else float(t[k]),
                 nmse=None if nmse is None else nmse[i],
                 lost_path_error=lost_path_error,
+                loaded=loaded,
             )
         )
     return metrics

@@ -358,7 +358,7 @@ def collect_garbage_rarely() -> None:
 
 def entry_point() -> None:
     """Console-script entry point. The ``ddtrack`` process gives JAX one CPU device per core, so that ``mc``
-    batches split over the cores (``runner.on_each_device``), and collects garbage in large rounds
+    batches split over the cores (``sim.batch.in_shares``), and collects garbage in large rounds
     (:func:`collect_garbage_rarely`); in-process callers of :func:`main` keep their own settings. JAX is imported
     only when a command needs it, so ``--help`` starts fast."""
     collect_garbage_rarely()

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
-from typing import Any
+from typing import Any, TypeVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ..precision import float64_in_this_thread
 from .result import SimResult
 from .simulate import DIVERGENCE_SPEED, simulate
 
@@ -105,3 +108,42 @@ def simulate_alone(
         divergence_speed=divergence_speed,
     )
     return jax.tree_util.tree_map(lambda leaf: leaf[0], batch)
+
+
+Batched = TypeVar("Batched")
+
+
+def in_shares(function: Callable[..., Batched], *args: Batched) -> Batched:
+    """``function(*args)`` for a batch of runs (every array's leading axis is the run), the runs split evenly into
+    one share per JAX device (``ddtrack`` asks for one per core: ``jax_num_cpu_devices``), each share computed as a
+    batch of its own, from a thread of its own (in the caller's float64 setting, a ``with jax.enable_x64(True):``
+    block included), all on the first device: one compiled program serves every share (a program per device
+    compiled it once for each), and XLA runs the threads' calls side by side. The results are joined on the host.
+    Left whole with one device, when the runs do not split evenly, or when a share would be a single run (computed
+    as a lone run, it would round differently from its row in a batch: ``sim.vmap_runs``). Each share runs the
+    program a batch of its size gets, so each row is the bits that batch gives it (its single run's, below 16 runs
+    per share: docs/reliability.md); one program partitioned over the devices was not, for the NN-adaptive law (its
+    emulator's rows moved in the last bits)."""
+    shares = len(jax.devices())
+    runs = len(jax.tree_util.tree_leaves(args)[0])
+    if shares == 1 or runs % shares or runs < 2 * shares:
+        return function(*args)
+    share = runs // shares
+    host = jax.tree_util.tree_map(np.asarray, args)  # cut on the host: a slice in JAX compiles a program per shape
+    float64 = jax.config.read("jax_enable_x64")  # this thread's: `with jax.enable_x64(True):` holds only in it
+    device = jax.devices()[0]  # the same device for every share: its program is compiled once
+
+    def compute(i: int) -> Batched:
+        rows = slice(i * share, (i + 1) * share)
+        with float64_in_this_thread(float64):
+            part = function(*jax.device_put(jax.tree_util.tree_map(lambda leaf: leaf[rows], host), device))
+        return jax.tree_util.tree_map(np.asarray, part)
+
+    # a thread per share: called one after another from one thread, the NN identification's shares ran one after
+    # another, no faster than one share (docs/benchmarks.md, "ddtrack mc"); from a thread each, side by side
+    pool = ThreadPoolExecutor(shares)
+    try:
+        parts = list(pool.map(compute, range(shares)))
+    finally:  # on Ctrl-C, return at once (the shares still computing end unwatched): waiting held `mc` for seconds
+        pool.shutdown(wait=False, cancel_futures=True)
+    return jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *parts)
