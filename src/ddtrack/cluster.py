@@ -1,5 +1,5 @@
-"""Where ``sweep`` and ``bench`` run: their cluster options, checked before anything runs, the Dask client
-of a running scheduler or of an embedded cluster on 127.0.0.1, and the settings every worker process takes."""
+"""Where ``sweep`` and ``bench`` run: their cluster options, checked before anything runs, and the Dask client
+of a running scheduler or of an embedded cluster on 127.0.0.1."""
 
 from __future__ import annotations
 
@@ -101,27 +101,3 @@ def local_cluster(workers: int) -> Any:
         dashboard_address="127.0.0.1:0",
         silence_logs=logging.ERROR,
     )
-
-
-def cache_on_every_worker(client: Any) -> None:
-    """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
-    (:func:`ddtrack.compilations.enable_compilation_cache`) on every worker process of ``client``'s cluster, now and as
-    workers join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
-    settings. A threaded worker in the driver's own process is left alone: that process is its caller's."""
-    from distributed import WorkerPlugin
-
-    class CompilationCache(WorkerPlugin):
-        name = "ddtrack-compilation-cache"
-
-        def __init__(self, driver_pid: int) -> None:
-            self.driver_pid = driver_pid
-
-        def setup(self, worker: Any) -> None:
-            if os.getpid() != self.driver_pid:
-                from ddtrack.compilations import enable_compilation_cache
-                from ddtrack.precision import enable_float64
-
-                enable_float64()
-                enable_compilation_cache()
-
-    client.register_plugin(CompilationCache(os.getpid()))

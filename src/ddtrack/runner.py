@@ -8,8 +8,10 @@ disturbances unchanged (common random numbers).
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable, Sequence
 from functools import partial
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -35,6 +37,30 @@ from .trajectories import Trajectory
 from .trajectories.switched import TrajectoryFrame
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
+
+
+def cache_on_every_worker(client: Any) -> None:
+    """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
+    (:func:`ddtrack.compilations.enable_compilation_cache`) on every worker process of ``client``'s cluster, now and as
+    workers join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
+    settings. A threaded worker in the driver's own process is left alone: that process is its caller's."""
+    from distributed import WorkerPlugin
+
+    class CompilationCache(WorkerPlugin):
+        name = "ddtrack-compilation-cache"
+
+        def __init__(self, driver_pid: int) -> None:
+            self.driver_pid = driver_pid
+
+        def setup(self, worker: Any) -> None:
+            if os.getpid() != self.driver_pid:
+                from ddtrack.compilations import enable_compilation_cache
+                from ddtrack.precision import enable_float64
+
+                enable_float64()
+                enable_compilation_cache()
+
+    client.register_plugin(CompilationCache(os.getpid()))
 
 
 def streams(seed: int) -> dict[str, jax.Array]:

@@ -31,12 +31,11 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .cluster import cache_on_every_worker
 from .compilations import release_compilations
 from .errors import ConfigError, did_you_mean
 from .metrics import warning_counts
 from .outdir import atomic_write
-from .runner import monte_carlo
+from .runner import cache_on_every_worker, monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
 from .trajectories.switched import TrajectoryFrame, trajectory_frame
 
