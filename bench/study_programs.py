@@ -40,12 +40,11 @@ def count_programs(controllers: str) -> tuple[int, int]:
     from ddtrack.compilations import counting_programs
     from ddtrack.robot_suite import RobotSuite, plan_robot_suite
     from ddtrack.runner import monte_carlo
-    from ddtrack.trajectories.switched import trajectory_frame
 
     ddtrack.enable_float64()
     short = ("simulation.duration=2.0", "simulation.metric_window=[0.0, 2.0]")
     plan = plan_robot_suite(RobotSuite(seeds=2, overrides=short), controllers.split(","))
-    frame = trajectory_frame([c.scenario.trajectory.build() for c in plan.configurations])  # as run_sweep does
+    frame = plan.trajectory_frame()  # as run_sweep does
     with counting_programs() as counts:
         for configuration in plan.configurations:
             monte_carlo(configuration.scenario, [0, 1], chunk_size=2, frame=frame)

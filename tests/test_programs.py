@@ -13,7 +13,6 @@ from ddtrack.compilations import counting_programs
 from ddtrack.robot_suite import RobotSuite, plan_robot_suite
 from ddtrack.runner import monte_carlo
 from ddtrack.suite import BASELINE, SUITES, TUNED, plan_suite
-from ddtrack.trajectories.switched import trajectory_frame
 
 SHORT = ("simulation.duration=1.0", "simulation.metric_window=[0.0, 1.0]")
 SIMULATION = "jit(_metric_series)"  #: the batch program a study's cell runs (runner.batch_metrics)
@@ -25,7 +24,7 @@ def simulation_programs(plan, seeds=(0, 1)) -> int:
     """The simulation programs lowered running every cell of ``plan`` as the sweep's task does (in the study's
     trajectory frame), from an empty in-memory cache (so each structure counts once, whatever the tests before
     compiled)."""
-    frame = trajectory_frame([c.scenario.trajectory.build() for c in plan.configurations])
+    frame = plan.trajectory_frame()
     jax.clear_caches()
     with counting_programs() as counts:
         for configuration in plan.configurations:

@@ -420,7 +420,7 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
     lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
-    loaded = loading_warnings(scenario)  # as is what loading found (22 ms a run, most of a warm mc's time)
+    loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
     metrics = []
     for i in range(len(status)):
         k = int(failure_index[i])

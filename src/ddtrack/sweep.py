@@ -199,6 +199,10 @@ class Plan:
         """A short fingerprint of the plan's runs: an output folder resumes only the sweep that wrote it."""
         return hashlib.sha256("\n".join(sorted(self.runs)).encode()).hexdigest()[:16]
 
+    def trajectory_frame(self) -> TrajectoryFrame | None:
+        """The study's trajectory kinds: its cells on different kinds then share a program (None: one kind)."""
+        return trajectory_frame([c.scenario.trajectory.build() for c in self.configurations])
+
 
 def toml_value(value: Any) -> str:
     """A value as inline TOML, the form ``--set`` overrides are read in."""
@@ -434,7 +438,7 @@ def run_sweep(
         if key not in existing:
             missing.setdefault(index, []).append((key, seed))
     futures = {}
-    frame = trajectory_frame([c.scenario.trajectory.build() for c in plan.configurations])  # one program per kind
+    frame = plan.trajectory_frame()  # one program per structure, whatever trajectories the cells follow
     for index, runs in missing.items():
         configuration = plan.configurations[index]
         runs.sort(key=lambda pair: pair[1])
