@@ -469,6 +469,7 @@ def _one_control_step(previous_saturated: float):
         emulator=Emulator(mlp, scales, True),
         control_period=TC,
         analytic_coefficients=one_step_coefficient(jnp.asarray([10.0, 8.0]), TC),
+        freeze_time=0.0,
         rates=(300.0, 2e4, 5e3),
         gain_momentum=0.3,
         leakage=0.5,

@@ -30,6 +30,7 @@ LAYERS = [
         "layout",
         "integrators",
         "compilations",
+        "parameters",
     },
     {"precision"},
     {"outdir", "feasibility"},

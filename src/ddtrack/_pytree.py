@@ -42,6 +42,9 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
     type
         The same class, registered.
     """
+    for name, value in list(vars(cls).items()):  # a field declared by a parameter model takes its default there
+        if hasattr(value, "declared_field") and name in getattr(cls, "__annotations__", {}):
+            setattr(cls, name, value.declared_field(name))
     cls = dataclasses.dataclass(frozen=True)(cls)
     fields = [f for f in dataclasses.fields(cast(Any, cls)) if f.init]
     data = tuple(f.name for f in fields if not f.metadata.get("static", False))
@@ -67,12 +70,15 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
     return cls
 
 
-def static_field(**kwargs: Any) -> Any:
+def static_field(*, why: str = "", **kwargs: Any) -> Any:
     """A field of a :func:`pytree_dataclass` that is compile-time metadata (hashable, never an array): a change
     of its value compiles a new program, as a sample count or a scheme name should.
 
     Parameters
     ----------
+    why
+        Why it must be structure and cannot be a traced number (ddtrack's own static fields each say, or are
+        declared :data:`~ddtrack.parameters.Structure`; ``tests/test_parameters.py`` holds them to it).
     **kwargs
         Passed to ``dataclasses.field`` (``default=...``).
 
@@ -81,4 +87,15 @@ def static_field(**kwargs: Any) -> Any:
     dataclasses.Field
         The field, marked static.
     """
-    return dataclasses.field(metadata={"static": True}, **kwargs)
+    return dataclasses.field(metadata={"static": True, "why": why}, **kwargs)
+
+
+def parts(obj: Any) -> list[Any]:
+    """``obj`` and every dataclass instance inside it, depth first (a cascade's outer law and inner loop, MPPI's
+    cost): what a check over a built controller's declared fields walks."""
+    if not dataclasses.is_dataclass(obj) or isinstance(obj, type):
+        return []
+    found = [obj]
+    for field in dataclasses.fields(obj):
+        found += parts(getattr(obj, field.name))
+    return found

@@ -5,6 +5,9 @@ from .backstepping import (
     MAX_VELOCITY,
     MAX_YAW_RATE,
     Backstepping,
+    KanayamaGains,
+    StrictTerm,
+    VelocityClamps,
     clamp_command,
     kanayama_command,
     kanayama_command_rate,
@@ -12,12 +15,13 @@ from .backstepping import (
 )
 from .base import Cascade, Controller, Logs, TorqueLaw, VelocityCommand, VelocityLaw, VelocityOutput
 from .dither import Dithered
-from .inner import ComputedTorque, HeldLoop, WheelPD
+from .inner import ComputedTorque, HeldLoop, InnerLoopParameters, WheelPD
 from .nn import MLP, Scales, init_mlp
 from .nn_adaptive import (
     AdaptiveMemory,
     Emulator,
     NNAdaptiveBackstepping,
+    NNAdaptiveParameters,
     cost_gradient,
     emulator_scales,
     error_jacobian_body,
@@ -39,11 +43,16 @@ __all__ = [
     "Dithered",
     "Emulator",
     "HeldLoop",
+    "InnerLoopParameters",
+    "KanayamaGains",
     "Logs",
     "NNAdaptiveBackstepping",
+    "NNAdaptiveParameters",
     "Replay",
     "Scales",
+    "StrictTerm",
     "TorqueLaw",
+    "VelocityClamps",
     "VelocityCommand",
     "VelocityLaw",
     "VelocityOutput",

@@ -7,10 +7,12 @@ from typing import ClassVar
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
-from .._pytree import pytree_dataclass, static_field
+from .._pytree import pytree_dataclass
 from ..geometry import error_rates, posture_error
 from ..layout import pose, velocity
+from ..parameters import Parameters, Positive, Structure, declared
 from ..trajectories import Reference
 from .base import Logs, VelocityCommand
 
@@ -69,6 +71,27 @@ KANAYAMA_GAINS = (1.0, 55.0, 15.0)
 MAX_VELOCITY, MAX_YAW_RATE = 2.0, 4.0
 
 
+class KanayamaGains(Parameters):
+    """Kanayama's gains (paper eq. 12)."""
+
+    gains: tuple[Positive, Positive, Positive] = Field(
+        KANAYAMA_GAINS, description="[Kx [1/s], Ky [1/m^2], Ktheta [1/m]] of Kanayama's law (paper eq. 12)."
+    )
+
+
+class VelocityClamps(Parameters):
+    """The clamps on the velocity command (v_c, omega_c)."""
+
+    max_velocity: Positive = Field(MAX_VELOCITY, description="Clamp on |v_c| [m/s].")
+    max_yaw_rate: Positive = Field(MAX_YAW_RATE, description="Clamp on |omega_c| [rad/s].")
+
+
+class StrictTerm(Parameters):
+    """Whether the inner loop adds the strict-backstepping cross term (model.md §2.4, not in the paper)."""
+
+    strict: Structure[bool] = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
+
+
 @pytree_dataclass
 class Backstepping:
     """Kanayama backstepping velocity law (paper eq. 12; model.md §2.4, 2.5).
@@ -83,9 +106,9 @@ class Backstepping:
     kx: Array | float = KANAYAMA_GAINS[0]
     ky: Array | float = KANAYAMA_GAINS[1]
     ktheta: Array | float = KANAYAMA_GAINS[2]
-    max_velocity: Array | float = MAX_VELOCITY
-    max_yaw_rate: Array | float = MAX_YAW_RATE
-    strict: bool = static_field(default=False)
+    max_velocity: Array | float = declared(VelocityClamps)
+    max_yaw_rate: Array | float = declared(VelocityClamps)
+    strict: bool = declared(StrictTerm)
     output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
     @property

@@ -5,16 +5,33 @@ Both saturate at the nominal ``max_torque`` and report whether they did.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from .._pytree import FloatVector, pytree_dataclass
 from ..layout import velocity
 from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
+from ..parameters import NonNegative, Parameters, Positive, Structure, declared
 from ..trajectories import Reference
 from .base import VelocityCommand
+
+
+class InnerLoopParameters(Parameters):
+    """The shared inner loop's parameters (docs/architecture.md): which loop, and its gains."""
+
+    inner: Structure[Literal["computed_torque", "pd", "none"]] = Field(
+        "computed_torque",
+        description=(
+            "Inner (dynamic) loop: computed torque (eq. 11), wheel PD, or none: the outer law's (v_c, omega_c) go "
+            "to the robot as its velocity command (cmd_vel)."
+        ),
+    )
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
+    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
+    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
 
 
 class HeldLoop(NamedTuple):
@@ -55,7 +72,7 @@ class ComputedTorque:
     """
 
     nominal: RobotParams
-    kc: FloatVector = (10.0, 10.0)
+    kc: FloatVector = declared(InnerLoopParameters)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()
@@ -82,8 +99,8 @@ class WheelPD:
     """
 
     nominal: RobotParams
-    kp: float = 0.125
-    kd: float = 0.0
+    kp: float = declared(InnerLoopParameters)
+    kd: float = declared(InnerLoopParameters)
     control_period: float = 0.01
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Array:

@@ -15,22 +15,92 @@ One control period (model.md §3.8)::
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Annotated, Any, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from .._pytree import FloatVector, pytree_dataclass, static_field
 from ..geometry import body_increment, posture_error, rotation
 from ..layout import pose, pose_vector, velocity
+from ..parameters import NonNegative, Parameters, Positive, PositiveTriple, Structure, declared
 from ..trajectories import Reference
-from .backstepping import MAX_VELOCITY, MAX_YAW_RATE, kanayama_command, velocity_command
+from .backstepping import StrictTerm, VelocityClamps, kanayama_command, velocity_command
 from .base import Logs, VelocityCommand
 from .nn import MLP, Scales, backprop, input_jacobian, momentum_step, sample_loss, zeros_like
 
 JACOBIANS = ("network", "analytic", "quasi_static", "model", "model_sensitivity")
 ERROR_JACOBIANS = ("exact", "paper")
+Fraction = Annotated[float, Field(ge=0.0, lt=1.0)]
+
+
+class NNAdaptiveParameters(Parameters):
+    """The NN-adaptive law's own parameters (model.md §3): the gain law, the emulator, and its identification."""
+
+    rates: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (200.0, 200.0, 200.0),
+        description=("Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."),
+    )
+    gain_momentum: Fraction = Field(0.0, description="beta_K, momentum of the gains.")
+    max_step: PositiveTriple = Field((0.05, 5.0, 0.5), description="Largest gain change per control period.")
+    gain_min: PositiveTriple = Field((0.1, 1.0, 0.1), description="Lower gain bounds (Kx, Ky, Ktheta).")
+    gain_max: PositiveTriple = Field((10.0, 600.0, 60.0), description="Upper gain bounds (Kx, Ky, Ktheta).")
+    gate_error: Positive = Field(0.5, description="Gains adapt only while e_tr is below this [m].")
+    leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
+    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (1.0, 50.0, 1.0), description=("Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta).")
+    )
+    jacobian: Structure[Literal["network", "analytic", "quasi_static", "model", "model_sensitivity"]] = Field(
+        "network",
+        description=(
+            "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
+            "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."
+        ),
+    )
+    error_jacobian: Structure[Literal["exact", "paper"]] = Field(
+        "exact", description=("d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e.")
+    )
+    emulator: Structure[Literal["E1", "E0"]] = Field(
+        "E1", description=("E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c).")
+    )
+    hidden_units: Structure[int] = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
+    learning_rate: Positive = Field(0.2, description="Emulator backpropagation rate eta.")
+    momentum: Fraction = Field(0.3, description="Emulator momentum beta.")
+    gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
+    online_learning: Structure[bool] = Field(True, description="Train the emulator on every new sample.")
+    learn_saturated: Structure[bool] = Field(
+        False,
+        description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
+    )
+    structured_jacobian: Structure[bool] = Field(
+        False, description="Keep only the two direct, positive Jacobian entries."
+    )
+    identification: Structure[bool] = Field(True, description="Pre-train the emulator on an identification run.")
+    identification_duration: Structure[Positive] = Field(
+        60.0, le=3600.0, description="Length of the identification run [s]."
+    )
+    epochs: Structure[int] = Field(
+        100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data."
+    )
+    identification_speed: tuple[Positive, Positive] | None = Field(
+        None,
+        description=(
+            "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
+            "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."
+        ),
+    )
+    dither: tuple[NonNegative, NonNegative] | None = Field(
+        None,
+        description=(
+            "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
+            "(0.05, 0.1) scaled like the identification reference."
+        ),
+    )
+    freeze_time: NonNegative | None = Field(
+        None, description=("No gain change before this time [s]; default 0 with identification, 2 without.")
+    )
 
 
 @pytree_dataclass
@@ -40,7 +110,7 @@ class Emulator:
 
     mlp: MLP
     scales: Scales
-    uses_velocity: bool = static_field(default=True)
+    uses_velocity: bool = static_field(default=True, why="the network's input size: E1 reads the velocity, E0 not")
 
     def inputs(self, nu_c: Array, nu: Array) -> Array:
         return jnp.concatenate([nu_c, nu]) if self.uses_velocity else nu_c
@@ -149,26 +219,26 @@ class NNAdaptiveBackstepping:
     emulator: Emulator
     control_period: float
     analytic_coefficients: Array  #: (c_v, c_omega) of model.md §3.4 (a) for the nominal inner loop
-    rates: FloatVector = (200.0, 200.0, 200.0)  #: Lambda [1/s], with the normalised Jacobian
-    gain_momentum: float = 0.0  #: beta_K
-    max_step: FloatVector = (0.05, 5.0, 0.5)  #: per-sample clip of the gain change
-    gain_min: FloatVector = (0.1, 1.0, 0.1)
-    gain_max: FloatVector = (10.0, 600.0, 60.0)
-    gate_error: float = 0.5  #: [m]
-    leakage: float = 0.0  #: sigma [1/s], pull towards the initial gains
-    gamma: FloatVector = (1.0, 50.0, 1.0)  #: Gamma of eq. 22
-    learning_rate: float = 0.2  #: emulator eta
-    momentum: float = 0.3  #: emulator beta
-    gradient_clip: float = 5.0  #: emulator gradient-norm clip
-    freeze_time: float = 0.0  #: [s] no gain change before
-    max_velocity: float = MAX_VELOCITY
-    max_yaw_rate: float = MAX_YAW_RATE
-    jacobian: str = static_field(default="network")
-    error_jacobian: str = static_field(default="exact")
-    online_learning: bool = static_field(default=True)
-    learn_saturated: bool = static_field(default=False)
-    structured_jacobian: bool = static_field(default=False)
-    strict: bool = static_field(default=False)
+    freeze_time: float  #: [s] no gain change before (the scenario's default depends on the identification)
+    rates: FloatVector = declared(NNAdaptiveParameters)  #: Lambda [1/s], with the normalised Jacobian
+    gain_momentum: float = declared(NNAdaptiveParameters)  #: beta_K
+    max_step: FloatVector = declared(NNAdaptiveParameters)  #: per-sample clip of the gain change
+    gain_min: FloatVector = declared(NNAdaptiveParameters)
+    gain_max: FloatVector = declared(NNAdaptiveParameters)
+    gate_error: float = declared(NNAdaptiveParameters)  #: [m]
+    leakage: float = declared(NNAdaptiveParameters)  #: sigma [1/s], pull towards the initial gains
+    gamma: FloatVector = declared(NNAdaptiveParameters)  #: Gamma of eq. 22
+    learning_rate: float = declared(NNAdaptiveParameters)  #: emulator eta
+    momentum: float = declared(NNAdaptiveParameters)  #: emulator beta
+    gradient_clip: float = declared(NNAdaptiveParameters)  #: emulator gradient-norm clip
+    max_velocity: float = declared(VelocityClamps)
+    max_yaw_rate: float = declared(VelocityClamps)
+    jacobian: str = declared(NNAdaptiveParameters)
+    error_jacobian: str = declared(NNAdaptiveParameters)
+    online_learning: bool = declared(NNAdaptiveParameters)
+    learn_saturated: bool = declared(NNAdaptiveParameters)
+    structured_jacobian: bool = declared(NNAdaptiveParameters)
+    strict: bool = declared(StrictTerm)
     nominal_period: Any = None  #: ddtrack.sim.NominalPeriod, for the "model" Jacobians
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> AdaptiveMemory:

@@ -79,6 +79,7 @@ from gymnasium import spaces
 from jax import Array
 
 from .._pytree import pytree_dataclass
+from ..controllers import NNAdaptiveParameters
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
 from ..layout import pose, velocity
@@ -99,7 +100,8 @@ from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws, measured
 ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
 DEFAULT_EFFORT_WEIGHT = 1e-3  #: w of the effort term [1/(N m)^2]
-GAMMA = (1.0, 50.0, 1.0)  #: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1)
+#: Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta) (model.md §3.1): the NN-adaptive law's default
+GAMMA: tuple[float, float, float] = NNAdaptiveParameters.model_fields["gamma"].default
 RESET_OPTIONS = ("initial_pose",)
 
 

@@ -261,7 +261,7 @@ class VelocityDriver:
     motor: DCMotor
     kp: float
     ki: float
-    anti_windup: bool = static_field(default=True)
+    anti_windup: bool = static_field(default=True, why="an integrator clamp exists or not")
 
     def output(self, integral: Array, speed_setpoint: Array, wheel_speed: Array) -> tuple[Array, Array, Array, Array]:
         """(torque [N m], current [A], voltage asked [V], integral frozen: 1.0 or 0.0) at one instant."""

@@ -2,7 +2,34 @@
 
 from __future__ import annotations
 
+from pydantic import Field
+
 from .._pytree import pytree_dataclass
+from ..parameters import NonNegative, Parameters, Positive, declared
+
+
+class RobotParameters(Parameters):
+    """The reduced Lagrangian model's parameters, as a scenario's ``[robot]`` section declares them."""
+
+    mass: Positive = Field(10.0, description="Total mass m [kg].")
+    inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
+    com_offset: float = Field(
+        0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass ahead of the axle [m]."
+    )
+    wheel_radius: Positive = Field(0.05, le=2.0, description="Wheel radius R [m].")
+    half_axle: Positive = Field(0.25, le=5.0, description="Half the wheel separation L [m].")
+    max_torque: Positive = Field(10.0, description="Torque limit per wheel [N m].")
+    viscous_friction: NonNegative = Field(0.0, description="Viscous wheel friction b_w [N m s/rad].")
+    coulomb_friction: NonNegative = Field(0.0, description="Coulomb wheel friction tau_c [N m].")
+    friction_smoothing: Positive = Field(0.01, description="tanh smoothing wheel speed eps_f [rad/s].")
+    wheel_inertia: NonNegative = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "Spin inertia J_w of each wheel about its axle, wheel plus gear-reflected rotor N^2 J_rotor "
+            "[kg m^2]; 0: massless wheels (model.md §1.6)."
+        ),
+    )
 
 
 @pytree_dataclass
@@ -34,16 +61,16 @@ class RobotParams:
         [kg m^2] (model.md §1.6). 0: massless wheels, the model of §1.3.
     """
 
-    mass: float = 10.0
-    inertia: float = 0.56
-    com_offset: float = 0.05
-    wheel_radius: float = 0.05
-    half_axle: float = 0.25
-    viscous_friction: float = 0.0
-    coulomb_friction: float = 0.0
-    friction_smoothing: float = 0.01
-    max_torque: float = 10.0
-    wheel_inertia: float = 0.0
+    mass: float = declared(RobotParameters)
+    inertia: float = declared(RobotParameters)
+    com_offset: float = declared(RobotParameters)
+    wheel_radius: float = declared(RobotParameters)
+    half_axle: float = declared(RobotParameters)
+    viscous_friction: float = declared(RobotParameters)
+    coulomb_friction: float = declared(RobotParameters)
+    friction_smoothing: float = declared(RobotParameters)
+    max_torque: float = declared(RobotParameters)
+    wheel_inertia: float = declared(RobotParameters)
 
     @property
     def inertia_axle(self) -> float:

@@ -27,10 +27,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from pydantic import Field
 
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4
 from ..layout import BODY, Layout, velocity
+from ..parameters import NonNegative, Parameters, Structure, declared, declared_fields
 from .plants import ODEPlant
 from .sensing import encoder_angle, odometry_step, split_delay
 
@@ -116,12 +118,12 @@ class SensedPlant:
     gyro_bias: Array | float = 0.0
     noise_key: Array | None = None
     command_periods: Array | np.ndarray | int = 0
-    command_fraction: float = static_field(default=0.0)
-    queue_capacity: int = static_field(default=0)
-    measurement_periods: int = static_field(default=0)
-    odometry: bool = static_field(default=False)
-    fix_periods: int = static_field(default=0)
-    gyro: bool = static_field(default=False)
+    command_fraction: float = static_field(default=0.0, why="a split period integrates in two pieces (not yet traced)")
+    queue_capacity: int = static_field(default=0, why="the command queue's length, an array shape")
+    measurement_periods: int = static_field(default=0, why="the reading queue's length, an array shape")
+    odometry: bool = static_field(default=False, why="odometry states exist or not")
+    fix_periods: int = static_field(default=0, why="a fix counter exists or not (not yet traced)")
+    gyro: bool = static_field(default=False, why="a gyro-bias state exists or not")
 
     def __post_init__(self) -> None:
         """A plant built with a delay and no queue for it gets the least queue that holds it (``queue_capacity`` 0:
@@ -370,38 +372,75 @@ class SensedPlant:
         return jax.lax.fori_loop(0, steps, step, (inner, phi))
 
 
-@dataclass(frozen=True)
-class Sensing:
-    """The sensing chain of a scenario (``[sensing]``), before it knows its plant.
+class SensingParameters(Parameters):
+    """The sensing chain's parameters, as a scenario's ``[sensing]`` section declares them (the gyro's, which default
+    to the robot preset's, are the section's own)."""
 
-    Attributes
-    ----------
-    actuation_delay
-        tau_a [s], >= 0
-    measurement_delay
-        tau_m [s], a whole number of control periods
-    encoder_counts
-        counts per wheel revolution; 0: exact angles
-    odometry
-        the controller sees the odometry estimate
-    control_period
-        T_c [s]
-    fix_period, fix_gain, fix_position_std, fix_heading_std
-        an absolute fix every ``fix_period`` [s] (a whole number of periods; 0: none), blended in with weight
-        ``fix_gain``, with noise of these standard deviations [m], [rad]
-    gyro, gyro_noise_density, gyro_bias
-        odometry's heading from a gyro of this white rate noise [rad/s/sqrt(Hz)] and constant bias [rad/s]
+    actuation_delay: NonNegative = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "tau_a [s]: the command computed at t_k acts from t_k + tau_a until the next one acts; a fraction of a "
+            "control period splits the period between two commands."
+        ),
+    )
+    measurement_delay: Structure[NonNegative] = Field(
+        0.0,
+        le=10.0,
+        description=(
+            "tau_m [s], a whole number of control periods: the controller at t_k sees what its sensors read at "
+            "t_k - tau_m."
+        ),
+    )
+    encoder_counts: int = Field(
+        0,
+        ge=0,
+        le=10_000_000,
+        description=(
+            "Counts per wheel revolution of the encoders odometry reads, e.g. 4096 for a TurtleBot3's XL430; "
+            "0: exact wheel angles. Needs odometry = true."
+        ),
+    )
+    odometry: Structure[bool] = Field(
+        False,
+        description=(
+            "The controller sees the odometry estimate (encoder increments integrated with the [robot] wheel_radius "
+            "and half_axle, whatever [plant] says) instead of the true pose and velocity."
+        ),
+    )
+
+    fix_period: Structure[NonNegative] = Field(
+        0.0,
+        le=3600.0,
+        description=(
+            "An absolute fix (localisation) every fix_period [s], a whole number of control periods, corrects the "
+            "odometry estimate; 0: none. Needs odometry = true."
+        ),
+    )
+    fix_gain: float = Field(
+        0.5, gt=0.0, le=1.0, description="Weight g of the fix in the blend pose + g (fix - pose); 1: reset to it."
+    )
+    fix_position_std: NonNegative = Field(0.0, description="Noise of the fix on x and y [m].")
+    fix_heading_std: NonNegative = Field(0.0, description="Noise of the fix on theta [rad].")
+
+
+@dataclass(frozen=True)
+@declared_fields
+class Sensing:
+    """The sensing chain of a scenario (``[sensing]``), before it knows its plant: the fields of
+    :class:`SensingParameters` (documented there), the control period T_c [s], and whether odometry's heading comes
+    from a gyro of this white rate noise ``gyro_noise_density`` [rad/s/sqrt(Hz)] and constant ``gyro_bias`` [rad/s].
     """
 
-    actuation_delay: float = 0.0
-    measurement_delay: float = 0.0
-    encoder_counts: int = 0
-    odometry: bool = False
+    actuation_delay: float = declared(SensingParameters)
+    measurement_delay: float = declared(SensingParameters)
+    encoder_counts: int = declared(SensingParameters)
+    odometry: bool = declared(SensingParameters)
     control_period: float = 0.01
-    fix_period: float = 0.0
-    fix_gain: float = 0.5
-    fix_position_std: float = 0.0
-    fix_heading_std: float = 0.0
+    fix_period: float = declared(SensingParameters)
+    fix_gain: float = declared(SensingParameters)
+    fix_position_std: float = declared(SensingParameters)
+    fix_heading_std: float = declared(SensingParameters)
     gyro: bool = False
     gyro_noise_density: float = 0.0
     gyro_bias: float = 0.0

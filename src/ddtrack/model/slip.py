@@ -118,7 +118,7 @@ class SlipPlant:
     motor: DCMotor | None = None
     pwm_model: DCMotor | None = None
     com_height: Array | float = 0.0
-    scheme: str = static_field(default="rk4")
+    scheme: str = static_field(default="rk4", why="the integrator, a different program")
     substeps: Array | int = 1
     state_layout: ClassVar[Layout] = SLIP_STATE
     input_layout: ClassVar[Layout] = WHEEL_TORQUES

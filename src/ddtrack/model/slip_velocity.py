@@ -56,7 +56,7 @@ class SlipVelocityPlant:
 
     slip: SlipPlant
     driver: VelocityDriver
-    scheme: str = static_field(default="rk4")
+    scheme: str = static_field(default="rk4", why="the integrator, a different program")
     substeps: Array | int = 1
     state_layout: ClassVar[Layout] = SLIP_VELOCITY_STATE
     input_layout: ClassVar[Layout] = VELOCITY_COMMAND

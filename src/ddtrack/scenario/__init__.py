@@ -7,6 +7,7 @@ and how to fix it. Unknown keys, NaN and inf are errors; a ``[plant]`` key left 
 
 from __future__ import annotations
 
+from ..parameters import PositiveTriple as PositiveTriple
 from ._base import MAX_CONTROL_PERIODS as MAX_CONTROL_PERIODS
 from ._base import MAX_COORDINATE as MAX_COORDINATE
 from ._base import MAX_INPUT_BYTES as MAX_INPUT_BYTES
@@ -32,7 +33,6 @@ from .build import to_toml_dict as to_toml_dict
 from .controller_configs import BacksteppingConfig as BacksteppingConfig
 from .controller_configs import InnerLoopConfig as InnerLoopConfig
 from .controller_configs import NNAdaptiveConfig as NNAdaptiveConfig
-from .controller_configs import PositiveTriple as PositiveTriple
 from .document import DISTURBANCES as DISTURBANCES
 from .document import Scenario as Scenario
 from .document import summary as summary

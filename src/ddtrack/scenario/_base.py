@@ -6,17 +6,12 @@ from __future__ import annotations
 
 import errno
 from pathlib import Path
-from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field
+from ..parameters import MAX_COORDINATE, Coordinate, Length, NonNegative, Parameters, Position, Positive
 
-Positive = Annotated[float, Field(gt=0.0)]
-NonNegative = Annotated[float, Field(ge=0.0)]
+# re-exported: every section's bounded numeric types
+__all__ = ["MAX_COORDINATE", "Coordinate", "Length", "NonNegative", "Position", "Positive"]
 Pair = tuple[float, float]
-MAX_COORDINATE = 1e6  # [m]: 1000 km; far larger positions and lengths break the plots (ticks of 1e308 m)
-Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
-Position = tuple[Coordinate, Coordinate]
-Length = Annotated[float, Field(gt=0.0, le=MAX_COORDINATE)]
 
 
 class FieldError(ValueError):
@@ -32,8 +27,8 @@ MAX_SEED = 2**63 - 1  # jax.random.PRNGKey takes an int64
 MAX_INPUT_BYTES = 64 * 2**20  # a scenario, sweep or waypoints file larger than this is a mistake
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=False)
+class _Section(Parameters):
+    """The root of every scenario section (unknown keys and non-finite numbers are errors; frozen)."""
 
 
 def read_input(path: Path) -> bytes:

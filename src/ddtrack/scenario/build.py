@@ -9,6 +9,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from .._pytree import parts
 from ..controllers import Controller
 from ..errors import ConfigError
 from ..model import DynamicPlant, KinematicPlant, MeasurementNoise, Plant, RobotParams, Sensing, WheelDisturbance
@@ -93,6 +94,13 @@ def build(
         controller = config.build(nominal, sim.control_period, key, trajectory=trajectory)
     else:
         controller = config.build(nominal, sim.control_period, key)
+    for part in parts(controller):  # each part that samples its own time must sample at the scenario's period
+        period = getattr(part, "control_period", None)
+        if period is not None and not isinstance(period, jax.core.Tracer) and float(period) != sim.control_period:
+            raise TypeError(
+                f"controller kind {kind.name!r} builds a {type(part).__name__} with control_period {period!r}, "
+                f"but the scenario's is {sim.control_period!r}: pass build's control_period on"
+            )
     output = controller_output(config)
     built_output = getattr(controller, "output_kind", output)
     if built_output != output:  # the registration (or the config) and the class must agree on what the plant receives

@@ -6,22 +6,24 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
-from pydantic import Field, model_validator
+from pydantic import model_validator
 
 from ..controllers import (
-    KANAYAMA_GAINS,
-    MAX_VELOCITY,
-    MAX_YAW_RATE,
     Backstepping,
     Cascade,
     ComputedTorque,
     Emulator,
     HeldLoop,
+    InnerLoopParameters,
+    KanayamaGains,
     NNAdaptiveBackstepping,
+    NNAdaptiveParameters,
+    StrictTerm,
+    VelocityClamps,
     VelocityOutput,
     WheelPD,
     emulator_scales,
@@ -33,8 +35,6 @@ from ..model import DynamicPlant, RobotParams
 from ..sim import NominalPeriod
 from ._base import (
     FieldError,
-    NonNegative,
-    Positive,
     _Section,
 )
 
@@ -48,12 +48,8 @@ class _ControllerSection(_Section):
     kind: str  # each controller narrows it to its Literal; declared here so that it stays the first key
 
 
-class _KanayamaGains(_ControllerSection):
+class _KanayamaGains(KanayamaGains, _ControllerSection):
     """Kanayama's gains (paper eq. 12)."""
-
-    gains: tuple[Positive, Positive, Positive] = Field(
-        KANAYAMA_GAINS, description="[Kx [1/s], Ky [1/m^2], Ktheta [1/m]] of Kanayama's law (paper eq. 12)."
-    )
 
     def command_feedback(self, peak_speed: float, control_period: float) -> tuple[float, float]:
         """-d nu_c_dot / d nu of Kanayama's analytic command rate at zero error (model.md §2.5, 2.7): (Kx, v_r
@@ -63,11 +59,8 @@ class _KanayamaGains(_ControllerSection):
         return (kx, peak_speed * ktheta)
 
 
-class _VelocityClamps(_ControllerSection):
+class _VelocityClamps(VelocityClamps, _ControllerSection):
     """The clamps on the velocity command (v_c, omega_c)."""
-
-    max_velocity: Positive = Field(MAX_VELOCITY, description="Clamp on |v_c| [m/s].")
-    max_yaw_rate: Positive = Field(MAX_YAW_RATE, description="Clamp on |omega_c| [rad/s].")
 
 
 def same_named(config: _Section, cls: Any, **derived: Any) -> Any:
@@ -78,24 +71,13 @@ def same_named(config: _Section, cls: Any, **derived: Any) -> Any:
     return cls(**{name: getattr(config, name) for name in names - set(derived)}, **derived)
 
 
-class _InnerLoopConfig(_ControllerSection):
+class _InnerLoopConfig(InnerLoopParameters, _ControllerSection):
     """The keys of a controller that outputs (v_c, omega_c) over the shared inner loop (docs/architecture.md).
 
     The inner loop is computed torque (eq. 11) or wheel-space PD (model.md §2.6), so every velocity-level
     controller meets the same dynamics layer; or none, the outer law's command going to a velocity-commanded
     base as its cmd_vel (model.md §2.7).
     """
-
-    inner: Literal["computed_torque", "pd", "none"] = Field(
-        "computed_torque",
-        description=(
-            "Inner (dynamic) loop: computed torque (eq. 11), wheel PD, or none: the outer law's (v_c, omega_c) go "
-            "to the robot as its velocity command (cmd_vel)."
-        ),
-    )
-    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11 (computed torque) [1/s].")
-    kp: Positive = Field(0.125, description="Wheel PD proportional gain [N m s/rad].")
-    kd: NonNegative = Field(0.0, description="Wheel PD derivative gain [N m s^2/rad].")
 
     def build_inner(self, nominal: RobotParams, control_period: float) -> ComputedTorque | WheelPD:
         """The inner loop on the ``nominal`` model, sampled every ``control_period`` [s] (not for inner = "none")."""
@@ -149,11 +131,9 @@ class _InnerLoopConfig(_ControllerSection):
         )
 
 
-class _KanayamaConfig(_VelocityClamps, _KanayamaGains, _InnerLoopConfig):
+class _KanayamaConfig(StrictTerm, _VelocityClamps, _KanayamaGains, _InnerLoopConfig):
     """The keys of Kanayama's law (paper eq. 12) over the inner loop, shared by backstepping and its NN-adaptive
     form."""
-
-    strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
 
     @model_validator(mode="after")
     def _strict_needs_computed_torque(self) -> _KanayamaConfig:
@@ -179,69 +159,12 @@ class BacksteppingConfig(_KanayamaConfig):
 
 
 InnerLoopConfig = _InnerLoopConfig  #: public name, for a plugin's config over the shared inner loop (docs/plugins.md)
-PositiveTriple = tuple[Positive, Positive, Positive]
 
 
-class NNAdaptiveConfig(_KanayamaConfig):
+class NNAdaptiveConfig(NNAdaptiveParameters, _KanayamaConfig):
     """The paper's NN-adaptive backstepping: gains tuned online through an emulator network (model.md §3)."""
 
     kind: Literal["nn_adaptive_backstepping"] = "nn_adaptive_backstepping"
-    rates: tuple[NonNegative, NonNegative, NonNegative] = Field(
-        (200.0, 200.0, 200.0),
-        description=("Lambda: gain adaptation rates [1/s] with the normalised Jacobian; 0 gives backstepping."),
-    )
-    gain_momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.0, description="beta_K, momentum of the gains.")
-    max_step: PositiveTriple = Field((0.05, 5.0, 0.5), description="Largest gain change per control period.")
-    gain_min: PositiveTriple = Field((0.1, 1.0, 0.1), description="Lower gain bounds (Kx, Ky, Ktheta).")
-    gain_max: PositiveTriple = Field((10.0, 600.0, 60.0), description="Upper gain bounds (Kx, Ky, Ktheta).")
-    gate_error: Positive = Field(0.5, description="Gains adapt only while e_tr is below this [m].")
-    leakage: NonNegative = Field(0.0, description="sigma: pull of the gains back to their initial values [1/s].")
-    gamma: tuple[NonNegative, NonNegative, NonNegative] = Field(
-        (1.0, 50.0, 1.0), description=("Gamma of the cost eq. 22, weights of (e_x, e_y, e_theta).")
-    )
-    jacobian: Literal["network", "analytic", "quasi_static", "model", "model_sensitivity"] = Field(
-        "network",
-        description=(
-            "Plant Jacobian of the gain law: the emulator's (eq. 34), analytic per-sample, "
-            "quasi-static, the nominal model's by autodiff, or that in the multi-step sensitivity."
-        ),
-    )
-    error_jacobian: Literal["exact", "paper"] = Field(
-        "exact", description=("d e_p / d q: exact (model.md §3.3) or the paper's approximation -T_e.")
-    )
-    emulator: Literal["E1", "E0"] = Field(
-        "E1", description=("E1: input (v_c, omega_c, v, omega); E0: the paper's (v_c, omega_c).")
-    )
-    hidden_units: int = Field(20, ge=1, le=1000, description="Hidden tanh units N_h.")
-    learning_rate: Positive = Field(0.2, description="Emulator backpropagation rate eta.")
-    momentum: Annotated[float, Field(ge=0.0, lt=1.0)] = Field(0.3, description="Emulator momentum beta.")
-    gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
-    online_learning: bool = Field(True, description="Train the emulator on every new sample.")
-    learn_saturated: bool = Field(
-        False,
-        description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
-    )
-    structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
-    identification: bool = Field(True, description="Pre-train the emulator on an identification run.")
-    identification_duration: Positive = Field(60.0, le=3600.0, description="Length of the identification run [s].")
-    epochs: int = Field(100, ge=1, le=10_000, description="N_c: pre-training epochs over the identification data.")
-    identification_speed: tuple[Positive, Positive] | None = Field(
-        None,
-        description=(
-            "Peak (speed [m/s], yaw rate [rad/s]) of the identification reference; default "
-            "(min(0.9, 0.8 max_velocity), min(0.7, 0.8 max_yaw_rate)), inside the clamps."
-        ),
-    )
-    dither: tuple[NonNegative, NonNegative] | None = Field(
-        None,
-        description=(
-            "Command dither (sigma_v [m/s], sigma_omega [rad/s]) of the identification run; default "
-            "(0.05, 0.1) scaled like the identification reference."
-        ),
-    )
-    freeze_time: NonNegative | None = Field(
-        None, description=("No gain change before this time [s]; default 0 with identification, 2 without.")
-    )
 
     @model_validator(mode="after")
     def _gains_inside_bounds(self) -> NNAdaptiveConfig:

@@ -10,6 +10,7 @@ from pydantic import Field, model_validator
 
 from ..errors import ConfigError, did_you_mean
 from ..model import MeasurementNoise, RobotParams, WheelDisturbance
+from ..model.params import RobotParameters
 from ._base import (
     MAX_CONTROL_PERIODS,
     MAX_SEED,
@@ -93,8 +94,8 @@ class SimulationConfig(_Section):
 NOT_PARAMETERS = {"preset", "top_speed", "top_yaw_rate"}
 
 
-class RobotConfig(_Section):
-    """The nominal model: what the controller believes."""
+class _PresetSection(_Section):
+    """The root of ``[robot]``: ``preset`` stays its first key, before the parameters it fills."""
 
     preset: str | None = Field(
         None,
@@ -103,25 +104,11 @@ class RobotConfig(_Section):
             "takes its published value; a key given here as well wins."
         ),
     )
-    mass: Positive = Field(10.0, description="Total mass m [kg].")
-    inertia: Positive = Field(0.56, description="Yaw inertia about the centre of mass I_C [kg m^2].")
-    com_offset: float = Field(
-        0.05, ge=-1.0, le=1.0, description="Signed offset d of the centre of mass ahead of the axle [m]."
-    )
-    wheel_radius: Positive = Field(0.05, le=2.0, description="Wheel radius R [m].")
-    half_axle: Positive = Field(0.25, le=5.0, description="Half the wheel separation L [m].")
-    max_torque: Positive = Field(10.0, description="Torque limit per wheel [N m].")
-    viscous_friction: NonNegative = Field(0.0, description="Viscous wheel friction b_w [N m s/rad].")
-    coulomb_friction: NonNegative = Field(0.0, description="Coulomb wheel friction tau_c [N m].")
-    friction_smoothing: Positive = Field(0.01, description="tanh smoothing wheel speed eps_f [rad/s].")
-    wheel_inertia: NonNegative = Field(
-        0.0,
-        le=10.0,
-        description=(
-            "Spin inertia J_w of each wheel about its axle, wheel plus gear-reflected rotor N^2 J_rotor "
-            "[kg m^2]; 0: massless wheels (model.md §1.6)."
-        ),
-    )
+
+
+class RobotConfig(RobotParameters, _PresetSection):
+    """The nominal model: what the controller believes."""
+
     top_speed: Positive | None = Field(
         None,
         description=(

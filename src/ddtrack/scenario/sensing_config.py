@@ -8,62 +8,16 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from ..model import Sensing
+from ..model.sensed import SensingParameters
 from ..robots import RobotPreset
 from ._base import FieldError, NonNegative, _Section
 
 # --- [sensing] -------------------------------------------------------------------------------
 
 
-class SensingConfig(_Section):
+class SensingConfig(SensingParameters, _Section):
     """Latency, wheel encoders and odometry between the robot and its controller (model.md §1.9); all off by
     default. Metrics stay against the true pose."""
-
-    actuation_delay: NonNegative = Field(
-        0.0,
-        le=10.0,
-        description=(
-            "tau_a [s]: the command computed at t_k acts from t_k + tau_a until the next one acts; a fraction of a "
-            "control period splits the period between two commands."
-        ),
-    )
-    measurement_delay: NonNegative = Field(
-        0.0,
-        le=10.0,
-        description=(
-            "tau_m [s], a whole number of control periods: the controller at t_k sees what its sensors read at "
-            "t_k - tau_m."
-        ),
-    )
-    encoder_counts: int = Field(
-        0,
-        ge=0,
-        le=10_000_000,
-        description=(
-            "Counts per wheel revolution of the encoders odometry reads, e.g. 4096 for a TurtleBot3's XL430; "
-            "0: exact wheel angles. Needs odometry = true."
-        ),
-    )
-    odometry: bool = Field(
-        False,
-        description=(
-            "The controller sees the odometry estimate (encoder increments integrated with the [robot] wheel_radius "
-            "and half_axle, whatever [plant] says) instead of the true pose and velocity."
-        ),
-    )
-
-    fix_period: NonNegative = Field(
-        0.0,
-        le=3600.0,
-        description=(
-            "An absolute fix (localisation) every fix_period [s], a whole number of control periods, corrects the "
-            "odometry estimate; 0: none. Needs odometry = true."
-        ),
-    )
-    fix_gain: float = Field(
-        0.5, gt=0.0, le=1.0, description="Weight g of the fix in the blend pose + g (fix - pose); 1: reset to it."
-    )
-    fix_position_std: NonNegative = Field(0.0, description="Noise of the fix on x and y [m].")
-    fix_heading_std: NonNegative = Field(0.0, description="Noise of the fix on theta [rad].")
 
     heading: Literal["encoders", "gyro"] | None = Field(
         None,

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 from pydantic import Field, ModelWrapValidatorHandler, PrivateAttr, ValidationInfo, model_validator
 
 from ..trajectories import Circle, FigureEight, Line, Sinusoid, Trajectory, polyline_path, square, timed_path
+from ..trajectories.curves import CircleParameters, FigureEightParameters, LineParameters, SinusoidParameters
 from ._base import (
-    MAX_COORDINATE,
     FieldError,
     Length,
     NonNegative,
@@ -23,13 +23,16 @@ from .waypoint_rows import WaypointRows, read_waypoint_rows, tidy_rows
 # --- [trajectory] --------------------------------------------------------------------------------
 
 
-class LineTrajectory(_Section):
+class _TrajectorySection(_Section):
+    """The root of a ``[trajectory]`` kind whose parameters are declared with its curve: ``kind`` stays first."""
+
+    kind: str
+
+
+class LineTrajectory(LineParameters, _TrajectorySection):
     """Straight line at constant speed (the paper's y = x is heading = pi/4)."""
 
     kind: Literal["line"]
-    speed: Positive = Field(0.5, description="v_r [m/s].")
-    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
-    heading: float = Field(0.0, description="Direction [rad].")
 
     def build(self) -> Trajectory:
         return Line(start=self.start, heading=self.heading, speed=self.speed)
@@ -61,15 +64,10 @@ class SquareTrajectory(_Section):
         return square(corner=self.corner, side=self.side, speed=self.speed, corner_radius=self.corner_radius)
 
 
-class CircleTrajectory(_Section):
+class CircleTrajectory(CircleParameters, _TrajectorySection):
     """Circle at constant speed."""
 
     kind: Literal["circle"]
-    center: Position = Field((0.0, 0.0), description="Centre [m].")
-    radius: Length = Field(2.0, description="Radius [m].")
-    speed: Positive = Field(0.5, description="v_r [m/s].")
-    start_angle: float = Field(-math.pi / 2, description="Polar angle of the start point about the centre [rad].")
-    clockwise: bool = Field(False, description="Direction of travel.")
 
     def build(self) -> Trajectory:
         return Circle(
@@ -81,27 +79,19 @@ class CircleTrajectory(_Section):
         )
 
 
-class FigureEightTrajectory(_Section):
+class FigureEightTrajectory(FigureEightParameters, _TrajectorySection):
     """Lemniscate of Gerono (speed between 0.66*size*w and 1.41*size*w, w = 2 pi / period: it never stops)."""
 
     kind: Literal["figure_eight"]
-    center: Position = Field((0.0, 0.0), description="Crossing point [m].")
-    size: Length = Field(3.0, description="Half-width [m].")
-    period: Positive = Field(60.0, description="Time for both lobes [s].")
 
     def build(self) -> Trajectory:
         return FigureEight(center=self.center, size=self.size, period=self.period)
 
 
-class SinusoidTrajectory(_Section):
+class SinusoidTrajectory(SinusoidParameters, _TrajectorySection):
     """A sine wave about a straight axis run at constant speed."""
 
     kind: Literal["sinusoid"]
-    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
-    heading: float = Field(0.0, description="Direction of the axis [rad].")
-    speed: Positive = Field(0.5, description="Speed along the axis [m/s].")
-    amplitude: Annotated[float, Field(ge=0.0, le=MAX_COORDINATE)] = Field(1.0, description="Lateral amplitude [m].")
-    wavelength: Length = Field(10.0, description="Wavelength along the axis [m].")
 
     def build(self) -> Trajectory:
         return Sinusoid(

@@ -28,7 +28,7 @@ class NominalPeriod:
     plant: Any
     inner: Any
     control_period: float
-    substeps: int = static_field(default=10)
+    substeps: int = static_field(default=10, why="a loop bound")
 
     def increment(self, nu: Array, command: Any) -> Array:
         """Body-frame pose increment (dx_b, dy_b, dtheta) over one period from velocity ``nu``, ``command`` (what the

@@ -129,7 +129,7 @@ class ClosedLoop:
     control_period: Array | float  #: T_c [s]
     divergence_error: Array | float  #: [m]
     divergence_speed: Array | float  #: [m/s] or [rad/s]
-    substeps: int = static_field(default=10)  #: integration steps per period
+    substeps: int = static_field(default=10, why="a loop bound (not yet traced)")  #: integration steps per period
 
     def period(
         self, x: Array, memory: Any, status: Array, k: Array, xi_disturbance: Array, xi_noise: Array

@@ -2,11 +2,52 @@
 
 from __future__ import annotations
 
+import math
+from typing import Annotated
+
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
-from .._pytree import FloatVector, pytree_dataclass, static_field
+from .._pytree import FloatVector, pytree_dataclass
+from ..parameters import MAX_COORDINATE, Length, Parameters, Position, Positive, Structure, declared
 from .base import ParametricCurve
+
+
+class LineParameters(Parameters):
+    """A straight line's parameters."""
+
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    heading: float = Field(0.0, description="Direction [rad].")
+
+
+class CircleParameters(Parameters):
+    """A circle's parameters."""
+
+    center: Position = Field((0.0, 0.0), description="Centre [m].")
+    radius: Length = Field(2.0, description="Radius [m].")
+    speed: Positive = Field(0.5, description="v_r [m/s].")
+    start_angle: float = Field(-math.pi / 2, description="Polar angle of the start point about the centre [rad].")
+    clockwise: Structure[bool] = Field(False, description="Direction of travel.")
+
+
+class FigureEightParameters(Parameters):
+    """A figure eight's parameters."""
+
+    center: Position = Field((0.0, 0.0), description="Crossing point [m].")
+    size: Length = Field(3.0, description="Half-width [m].")
+    period: Positive = Field(60.0, description="Time for both lobes [s].")
+
+
+class SinusoidParameters(Parameters):
+    """A sinusoid's parameters."""
+
+    start: Position = Field((0.0, 0.0), description="Position at t = 0 [m].")
+    heading: float = Field(0.0, description="Direction of the axis [rad].")
+    speed: Positive = Field(0.5, description="Speed along the axis [m/s].")
+    amplitude: Annotated[float, Field(ge=0.0, le=MAX_COORDINATE)] = Field(1.0, description="Lateral amplitude [m].")
+    wavelength: Length = Field(10.0, description="Wavelength along the axis [m].")
 
 
 @pytree_dataclass
@@ -16,9 +57,9 @@ class Line(ParametricCurve):
     Attributes: ``start`` (2,) [m], position at t = 0; ``heading`` [rad]; ``speed`` v_r > 0 [m/s].
     """
 
-    start: FloatVector = (0.0, 0.0)
-    heading: float = 0.0
-    speed: float = 0.5
+    start: FloatVector = declared(LineParameters)
+    heading: float = declared(LineParameters)
+    speed: float = declared(LineParameters)
 
     def position(self, t: Array) -> Array:
         direction = jnp.stack([jnp.cos(self.heading), jnp.sin(self.heading)])
@@ -30,11 +71,11 @@ class Circle(ParametricCurve):
     """Circle of ``radius`` [m] about ``center`` (2,) [m] at ``speed`` [m/s], starting at polar angle
     ``start_angle`` [rad], counter-clockwise unless ``clockwise``."""
 
-    center: FloatVector = (0.0, 0.0)
-    radius: float = 2.0
-    speed: float = 0.5
-    start_angle: float = -jnp.pi / 2
-    clockwise: bool = static_field(default=False)
+    center: FloatVector = declared(CircleParameters)
+    radius: float = declared(CircleParameters)
+    speed: float = declared(CircleParameters)
+    start_angle: float = declared(CircleParameters)
+    clockwise: bool = declared(CircleParameters)
 
     def position(self, t: Array) -> Array:
         direction = -1.0 if self.clockwise else 1.0
@@ -50,9 +91,9 @@ class FigureEight(ParametricCurve):
     varies between sqrt(7)/4*size*w (where cos^2(wt) = 3/8) and sqrt(2)*size*w (at the crossing): it never stops.
     """
 
-    center: FloatVector = (0.0, 0.0)
-    size: float = 3.0
-    period: float = 60.0
+    center: FloatVector = declared(FigureEightParameters)
+    size: float = declared(FigureEightParameters)
+    period: float = declared(FigureEightParameters)
 
     def position(self, t: Array) -> Array:
         phase = 2.0 * jnp.pi * t / self.period
@@ -64,11 +105,11 @@ class Sinusoid(ParametricCurve):
     """A sine wave about a straight axis: the axis is run at ``speed`` [m/s] from ``start`` along
     ``heading`` [rad], with lateral ``amplitude`` [m] and ``wavelength`` [m] along the axis."""
 
-    start: FloatVector = (0.0, 0.0)
-    heading: float = 0.0
-    speed: float = 0.5
-    amplitude: float = 1.0
-    wavelength: float = 10.0
+    start: FloatVector = declared(SinusoidParameters)
+    heading: float = declared(SinusoidParameters)
+    speed: float = declared(SinusoidParameters)
+    amplitude: float = declared(SinusoidParameters)
+    wavelength: float = declared(SinusoidParameters)
 
     def position(self, t: Array) -> Array:
         along = self.speed * t

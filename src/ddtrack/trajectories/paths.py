@@ -32,7 +32,7 @@ class PiecewisePath:
     offsets: Array
     length: float
     speed: float
-    loop: bool = static_field(default=False)
+    loop: bool = static_field(default=False, why="a closed path wraps its arc length")
 
     def __call__(self, t: Array | float) -> Reference:
         travelled = self.speed * jnp.asarray(t, dtype=float)

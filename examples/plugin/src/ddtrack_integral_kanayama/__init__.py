@@ -20,7 +20,15 @@ import ddtrack
 from ddtrack.controllers import Cascade, VelocityCommand
 from ddtrack.geometry import posture_error
 from ddtrack.model import RobotParams
-from ddtrack.scenario import InnerLoopConfig, NonNegative, Positive
+from ddtrack.parameters import NonNegative, Parameters, Positive, declared
+from ddtrack.scenario import InnerLoopConfig
+
+
+class IntegralParameters(Parameters):
+    """The integral action's parameters, declared once: the scenario's keys and the controller's defaults."""
+
+    ki: NonNegative = Field(0.5, description="Integral gain on the along-track error e_x [1/s^2].")
+    gate: Positive = Field(0.2, description="Integrate only while the tracking error is below this [m].")
 
 
 @ddtrack.pytree_dataclass  # the simulator is jitted: a controller is a frozen dataclass and a pytree of its parameters
@@ -31,9 +39,9 @@ class IntegralKanayama:
     kx: Any = 1.0  # [1/s]; Any: tune and the environment's gains mode put arrays here
     ky: Any = 55.0  # [1/m^2]
     ktheta: Any = 15.0  # [1/m]
-    ki: float = 0.5  # [1/s^2]
+    ki: float = declared(IntegralParameters)
     control_period: float = 0.01  # [s]
-    gate: float = 0.2  # integrate only while the tracking error is below this [m] (no wind-up)
+    gate: float = declared(IntegralParameters)  # no wind-up
 
     def init(self, x0: jax.Array, ref0: Any, key: jax.Array) -> jax.Array:
         """The memory: the integral of e_x [m s], zero."""
@@ -55,13 +63,11 @@ class IntegralKanayama:
         return memory
 
 
-class IntegralKanayamaConfig(InnerLoopConfig):
+class IntegralKanayamaConfig(IntegralParameters, InnerLoopConfig):
     """Kanayama backstepping with integral action on the along-track error, over the shared inner loop."""
 
     kind: Literal["integral_kanayama"]
     gains: tuple[Positive, Positive, Positive] = Field((1.0, 55.0, 15.0), description="[Kx, Ky, Ktheta].")
-    ki: NonNegative = Field(0.5, description="Integral gain on the along-track error e_x [1/s^2].")
-    gate: Positive = Field(0.2, description="Integrate only while the tracking error is below this [m].")
 
     def build(self, nominal: RobotParams, control_period: float, key: jax.Array) -> Cascade:
         """The controller; ``key`` is unused (nothing is drawn)."""

@@ -49,10 +49,12 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model import RobotParams, reduced_input_inverse, reduced_mass, wheel_speeds
+from ...parameters import NonNegative, Parameters, Positive, Structure, declared
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
@@ -77,6 +79,32 @@ def nominal_parameters(nominal: RobotParams) -> Array:
     return jnp.stack([jnp.asarray(getattr(nominal, name), float) for name in PARAMETERS])
 
 
+class AdaptiveBacksteppingParameters(Parameters):
+    """The adaptive computed-torque loop's parameters (Fukao et al. 2000)."""
+
+    kc: tuple[Positive, Positive] = Field(
+        (10.0, 10.0),
+        description=("K_c of eq. 11: the inner loop's bandwidth on the nominal model, K_D = M_bar K_c [1/s]."),
+    )
+    adaptation_gain: tuple[NonNegative, NonNegative, NonNegative] = Field(
+        (500.0, 5.0, 1e-4),
+        description=(
+            "Gamma of the estimates of (m [kg s^2/m^2], I_C [kg m^2 s^2], viscous friction b_w [kg m^2]); "
+            "0 freezes that estimate at the [robot] value."
+        ),
+    )
+    estimate_range: tuple[Positive, Positive] = Field(
+        (0.5, 2.0), description=("Projection bounds of the m and I_C estimates, as multiples of the [robot] values.")
+    )
+    max_friction: NonNegative = Field(
+        0.05,
+        description=(
+            "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."
+        ),
+    )
+    strict: Structure[bool] = Field(False, description="Add the strict-backstepping cross term to the torque law.")
+
+
 @pytree_dataclass
 class AdaptiveComputedTorque:
     """Computed torque on online estimates of (m, I_C, b_w) (module docstring; Fukao et al. 2000).
@@ -90,8 +118,8 @@ class AdaptiveComputedTorque:
     """
 
     nominal: RobotParams
-    kc: FloatVector = (10.0, 10.0)
-    gamma: FloatVector = (500.0, 5.0, 1e-4)
+    kc: FloatVector = declared(AdaptiveBacksteppingParameters)
+    gamma: FloatVector = declared(AdaptiveBacksteppingParameters, "adaptation_gain")
     lower: FloatVector = (5.0, 0.28, 0.0)
     upper: FloatVector = (20.0, 1.12, 0.05)
     control_period: float = 0.01

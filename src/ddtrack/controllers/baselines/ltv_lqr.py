@@ -29,12 +29,14 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
-from ..._pytree import FloatVector, pytree_dataclass, static_field
+from ..._pytree import FloatVector, pytree_dataclass
 from ...geometry import error_rates, posture_error
 from ...layout import pose, velocity
+from ...parameters import Parameters, Positive, PositiveTriple, Structure, declared
 from ...trajectories import Reference
-from ..backstepping import MAX_VELOCITY, MAX_YAW_RATE, clamp_command
+from ..backstepping import VelocityClamps, clamp_command
 from ..base import Logs, VelocityCommand
 
 
@@ -77,6 +79,29 @@ def lqr_gain(a: Array, b: Array, q: Array, r: Array, iterations: int) -> Array:
     return jnp.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
 
 
+class LTVLQRParameters(Parameters):
+    """The LTV/LQR law's parameters (WPILib's LTVUnicycleController's tolerances)."""
+
+    q_tolerance: PositiveTriple = Field(
+        (0.0625, 0.125, 2.0),
+        description=(
+            "Tolerated (e_x [m], e_y [m], e_theta [rad]); Q = diag(1/q^2) (Bryson's rule, WPILib's defaults)."
+        ),
+    )
+    r_tolerance: tuple[Positive, Positive] = Field(
+        (1.0, 2.0), description=("Tolerated velocity correction (v [m/s], omega [rad/s]); R = diag(1/r^2).")
+    )
+    min_velocity: Positive = Field(
+        1e-4, description=("|v_r| below this is linearised at this speed, where e_y stays controllable [m/s].")
+    )
+    dare_iterations: Structure[int] = Field(
+        32,
+        ge=1,
+        le=64,
+        description=("Doubling steps of the Riccati solver; 20 converge at min_velocity 1e-4 m/s and T_c 10 ms."),
+    )
+
+
 @pytree_dataclass
 class LTVUnicycleLQR:
     """LTV/LQR unicycle tracker (WPILib ``LTVUnicycleController``; Veness, sec. 8.9). A velocity law.
@@ -90,13 +115,13 @@ class LTVUnicycleLQR:
     would be late by a period and spike at corners. Stateless.
     """
 
-    q_tolerance: FloatVector = (0.0625, 0.125, 2.0)
-    r_tolerance: FloatVector = (1.0, 2.0)
+    q_tolerance: FloatVector = declared(LTVLQRParameters)
+    r_tolerance: FloatVector = declared(LTVLQRParameters)
     control_period: float = 0.01
-    min_velocity: float = 1e-4
-    max_velocity: float = MAX_VELOCITY
-    max_yaw_rate: float = MAX_YAW_RATE
-    dare_iterations: int = static_field(default=32)
+    min_velocity: float = declared(LTVLQRParameters)
+    max_velocity: float = declared(VelocityClamps)
+    max_yaw_rate: float = declared(VelocityClamps)
+    dare_iterations: int = declared(LTVLQRParameters)
     output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
     def gain(self, v_r: Array) -> Array:

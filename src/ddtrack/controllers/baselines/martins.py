@@ -33,14 +33,16 @@ gamma_1 k_v e_v^2 >= 0.
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
-from ..._pytree import FloatVector, pytree_dataclass, static_field
+from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model.lag import PIONEER_3DX_WITH_LASER
+from ...parameters import NonNegative, Parameters, Positive, Structure, declared
 from ...trajectories import Reference
 from ..backstepping import Backstepping
 from ..base import Logs
@@ -81,6 +83,40 @@ class CompensatorMemory(NamedTuple):
     previous_command: Array  #: nu_c of the previous period, for the finite-difference rate (2,)
 
 
+class CompensatorParameters(Parameters):
+    """Martins et al.'s adaptive compensator's parameters (model.md §2.8)."""
+
+    compensator_gain: tuple[Positive, Positive] = Field(
+        (4.0, 4.0),
+        description=(
+            "K (k_v, k_omega): the velocity error nu_c - nu decays at this rate on an exactly known base [1/s]."
+        ),
+    )
+    adaptation_rate: tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative] = Field(
+        (0.05, 0.05, 0.0, 0.05, 0.0, 0.05),
+        description=(
+            "Gamma, one rate per theta_1..theta_6 (0 freezes that estimate at theta0); the coupling terms "
+            "theta_3, theta_5 are frozen by default."
+        ),
+    )
+    leakage: NonNegative = Field(
+        0.01, description="lambda: the estimates leak back toward theta0 at this rate (sigma-modification) [1/s]."
+    )
+    theta0: tuple[Positive, Positive, float, float, float, float] = Field(
+        PIONEER_3DX_WITH_LASER,
+        description=(
+            "The prior and initial estimate of theta_1..theta_6 [s, s, s m/rad^2, 1, s/m, 1]; the default is the "
+            "Pioneer 3-DX's identified set (with laser)."
+        ),
+    )
+    command_rate: Structure[Literal["analytic", "difference"]] = Field(
+        "analytic",
+        description=(
+            "nu_c_dot from the kinematic law's analytic derivative, or as (nu_c - previous nu_c) / T_c from memory."
+        ),
+    )
+
+
 @pytree_dataclass
 class AdaptiveDynamicCompensator:
     """Kanayama's law over Martins et al.'s adaptive inverse of the velocity-lag model (module docstring).
@@ -100,12 +136,12 @@ class AdaptiveDynamicCompensator:
     """
 
     outer: Backstepping
-    compensator_gain: FloatVector = (4.0, 4.0)
-    adaptation_rate: FloatVector = (0.05, 0.05, 0.0, 0.05, 0.0, 0.05)
-    leakage: Array | float = 0.01
-    theta0: FloatVector = PIONEER_3DX_WITH_LASER
+    compensator_gain: FloatVector = declared(CompensatorParameters)
+    adaptation_rate: FloatVector = declared(CompensatorParameters)
+    leakage: Array | float = declared(CompensatorParameters)
+    theta0: FloatVector = declared(CompensatorParameters)
     control_period: float = 0.01
-    command_rate: str = static_field(default="analytic")
+    command_rate: str = declared(CompensatorParameters)
     output_kind: ClassVar[str] = "velocity"  #: what it hands the plant
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> CompensatorMemory:

@@ -36,13 +36,15 @@ from typing import ClassVar, NamedTuple
 import jax
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from ..._ordered import total
-from ..._pytree import FloatVector, pytree_dataclass, static_field
+from ..._pytree import FloatVector, pytree_dataclass
 from ...geometry import wrap_angle
 from ...integrators import semi_implicit_euler_step
 from ...layout import pose_vector, velocity
 from ...model import RobotParams, body_acceleration, pose_rate
+from ...parameters import NonNegative, Parameters, Positive, Structure, declared
 from ...trajectories import Reference, Trajectory
 from ..base import Logs
 
@@ -78,20 +80,54 @@ def rollout(nominal: RobotParams, state: Array, sequence: Array, dt: float) -> A
     return jax.lax.scan(advance, state, sequence)[1]
 
 
+class MPPIParameters(Parameters):
+    """MPPI's parameters (Williams et al. 2017): the sampling and the cost."""
+
+    samples: Structure[int] = Field(64, ge=1, le=10_000, description="K: torque sequences sampled per control period.")
+    horizon: Structure[int] = Field(20, ge=1, le=500, description="H: steps per sequence.")
+    model_step: Positive = Field(
+        0.05,
+        le=10.0,
+        description=("dt: how long each step of a sequence holds its torque, and the rollout's Euler step [s]."),
+    )
+    temperature: Positive = Field(
+        1.0,
+        description=(
+            "lambda of the weights exp(-(S - min S) / lambda), in cost units: lower trusts the best samples more."
+        ),
+    )
+    noise_std: tuple[Positive, Positive] = Field(
+        (0.2, 0.2), description=("sigma of the sampled torque perturbations, [right, left] wheel [N m].")
+    )
+    position_weight: NonNegative = Field(100.0, description="q_p of the squared position error, per step [1/m^2].")
+    heading_weight: NonNegative = Field(1.0, description="q_th of the squared heading error, per step [1/rad^2].")
+    velocity_weight: NonNegative = Field(1.0, description=("q_nu of |nu - nu_r|^2, per step [s^2/m^2 and s^2/rad^2]."))
+    effort_weight: NonNegative = Field(0.01, description="r of the squared wheel torques, per step [1/(N m)^2].")
+    terminal_weight: NonNegative = Field(
+        10.0, description=("q_T: the last step's position and heading terms count again, times this.")
+    )
+    limit_weight: NonNegative = Field(
+        1000.0,
+        description=("q_lim of the squared excess of |v| over max_velocity and |omega| over max_yaw_rate, per step."),
+    )
+    max_velocity: Positive = Field(2.0, description="Soft limit on |v| of the rollouts [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Soft limit on |omega| of the rollouts [rad/s].")
+
+
 @pytree_dataclass
 class MPPICost:
     """Weights of the MPPI cost (module docstring): q_p [1/m^2], q_th [1/rad^2], q_nu [per (m/s)^2 and
     (rad/s)^2], r [1/(N m)^2], q_T (multiplies the final position and heading terms), q_lim [per (m/s)^2
     and (rad/s)^2] beyond the soft limits v_max [m/s] and w_max [rad/s]."""
 
-    position: float = 100.0
-    heading: float = 1.0
-    velocity: float = 1.0
-    effort: float = 0.01
-    terminal: float = 10.0
-    limit: float = 1000.0
-    max_velocity: float = 2.0
-    max_yaw_rate: float = 4.0
+    position: float = declared(MPPIParameters, "position_weight")
+    heading: float = declared(MPPIParameters, "heading_weight")
+    velocity: float = declared(MPPIParameters, "velocity_weight")
+    effort: float = declared(MPPIParameters, "effort_weight")
+    terminal: float = declared(MPPIParameters, "terminal_weight")
+    limit: float = declared(MPPIParameters, "limit_weight")
+    max_velocity: float = declared(MPPIParameters)
+    max_yaw_rate: float = declared(MPPIParameters)
 
     def __call__(self, states: Array, torques: Array, reference: Array) -> Array:
         # written out, not jnp.sum: XLA rounded that reduce differently by batch size (ddtrack._ordered)
@@ -127,12 +163,12 @@ class MPPI:
     nominal: RobotParams
     trajectory: Trajectory
     cost: MPPICost = MPPICost()
-    model_step: float = 0.05
+    model_step: float = declared(MPPIParameters)
     control_period: float = 0.01
-    temperature: float = 1.0
-    noise_std: FloatVector = (0.2, 0.2)
-    samples: int = static_field(default=64)
-    horizon: int = static_field(default=20)
+    temperature: float = declared(MPPIParameters)
+    noise_std: FloatVector = declared(MPPIParameters)
+    samples: int = declared(MPPIParameters)
+    horizon: int = declared(MPPIParameters)
     output_kind: ClassVar[str] = "torque"  #: what it hands the plant
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> MPPIMemory:

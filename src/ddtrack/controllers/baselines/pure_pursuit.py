@@ -53,15 +53,18 @@ On a line or a circle at constant speed the true derivative is 0 anyway.
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from typing import Annotated, Any
 
 import jax
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
-from ..._pytree import pytree_dataclass, static_field
+from ..._pytree import pytree_dataclass
 from ...geometry import posture_error
 from ...layout import pose, pose_vector, position, velocity
+from ...parameters import NonNegative, Parameters, Positive, Structure, declared
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
@@ -114,6 +117,51 @@ def curvature_regulation(speed: Array, kappa: Array, min_radius: Array | float) 
     return speed * jnp.minimum(1.0, 1.0 / jnp.maximum(jnp.abs(kappa) * min_radius, 1e-300))
 
 
+class PurePursuitParameters(Parameters):
+    """Regulated pure pursuit's parameters (Macenski et al. 2023, Nav2's defaults where it has them)."""
+
+    lookahead_time: NonNegative = Field(
+        1.5, description=("Lookahead L = |v| * lookahead_time, clipped to [min_lookahead, max_lookahead] [s].")
+    )
+    min_lookahead: Positive = Field(0.3, description="Smallest lookahead distance [m].")
+    max_lookahead: Positive = Field(0.9, description="Largest lookahead distance [m]; equal to min_lookahead: fixed.")
+    pace_gain: NonNegative = Field(
+        1.0, description=("k_s: desired speed v_r + k_s e_x, so the along-track error e_x decays at this rate [1/s].")
+    )
+    min_radius: NonNegative = Field(
+        0.9,
+        description=(
+            "Arcs tighter than this radius slow the robot by radius / min_radius; 0 turns the regulation off [m]."
+        ),
+    )
+    min_regulated_speed: NonNegative = Field(
+        0.25, description=("The curvature regulation never slows below this (nor above the desired speed) [m/s].")
+    )
+    approach_distance: Positive = Field(
+        0.6,
+        description=("Slow down in proportion to the distance to where the reference comes to rest, within this [m]."),
+    )
+    min_approach_speed: NonNegative = Field(0.05, description="Floor of the approach slow-down [m/s].")
+    rotate_to_heading: Structure[bool] = Field(
+        True, description="Rotate in place while the carrot is far off the heading."
+    )
+    rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(
+        0.785, description=("Bearing of the carrot beyond which the robot rotates in place [rad].")
+    )
+    rotate_yaw_rate: Positive = Field(1.8, description="Yaw rate of the rotation in place [rad/s].")
+    search_horizon: Positive = Field(
+        5.0,
+        description=(
+            "The carrot is searched on the reference over [t, t + search_horizon] [s]; must cover the lookahead."
+        ),
+    )
+    search_samples: Structure[int] = Field(
+        50, ge=2, le=1000, description="Segments of that search (linear between samples)."
+    )
+    max_velocity: Positive = Field(2.0, description="Clamp on v_c [m/s].")
+    max_yaw_rate: Positive = Field(4.0, description="Clamp on |omega_c|, by slowing down on the same arc [rad/s].")
+
+
 @pytree_dataclass
 class RegulatedPurePursuit:
     """Regulated pure pursuit over a time-parameterised reference (module docstring; Macenski et al. 2023).
@@ -126,21 +174,21 @@ class RegulatedPurePursuit:
     """
 
     trajectory: Any
-    lookahead_time: float = 1.5
-    min_lookahead: float = 0.3
-    max_lookahead: float = 0.9
-    pace_gain: float = 1.0
-    min_radius: float = 0.9
-    min_regulated_speed: float = 0.25
-    approach_distance: float = 0.6
-    min_approach_speed: float = 0.05
-    rotate_min_angle: float = 0.785
-    rotate_yaw_rate: float = 1.8
-    max_velocity: float = 2.0
-    max_yaw_rate: float = 4.0
-    search_horizon: float = 5.0
-    search_samples: int = static_field(default=50)
-    rotate_to_heading: bool = static_field(default=True)
+    lookahead_time: float = declared(PurePursuitParameters)
+    min_lookahead: float = declared(PurePursuitParameters)
+    max_lookahead: float = declared(PurePursuitParameters)
+    pace_gain: float = declared(PurePursuitParameters)
+    min_radius: float = declared(PurePursuitParameters)
+    min_regulated_speed: float = declared(PurePursuitParameters)
+    approach_distance: float = declared(PurePursuitParameters)
+    min_approach_speed: float = declared(PurePursuitParameters)
+    rotate_min_angle: float = declared(PurePursuitParameters)
+    rotate_yaw_rate: float = declared(PurePursuitParameters)
+    max_velocity: float = declared(PurePursuitParameters)
+    max_yaw_rate: float = declared(PurePursuitParameters)
+    search_horizon: float = declared(PurePursuitParameters)
+    search_samples: int = declared(PurePursuitParameters)
+    rotate_to_heading: bool = declared(PurePursuitParameters)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()

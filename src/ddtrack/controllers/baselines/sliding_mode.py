@@ -27,10 +27,12 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model import RobotParams
+from ...parameters import NonNegative, Parameters, Positive, declared
 from ...trajectories import Reference
 from ..base import VelocityCommand
 from ..inner import ComputedTorque
@@ -39,6 +41,25 @@ from ..inner import ComputedTorque
 def switching_term(s: Array, gain: FloatVector, boundary_layer: FloatVector) -> Array:
     """K_s sat(s / phi): magnitude K_s outside |s| > phi, linear K_s s / phi inside (Slotine and Li sec. 7.2)."""
     return jnp.asarray(gain, float) * jnp.clip(s / jnp.asarray(boundary_layer, float), -1.0, 1.0)
+
+
+class SlidingModeParameters(Parameters):
+    """The sliding-mode inner loop's parameters (Slotine and Li 7.1-7.2)."""
+
+    kc: tuple[Positive, Positive] = Field((10.0, 10.0), description="K_c of eq. 11, the linear part [1/s].")
+    switching_gain: tuple[NonNegative, NonNegative] = Field(
+        (1.0, 2.0),
+        description=(
+            "K_s (v [m/s^2], omega [rad/s^2]): must exceed the matched disturbance as an acceleration; 0 gives "
+            "computed torque."
+        ),
+    )
+    boundary_layer: tuple[Positive, Positive] = Field(
+        (0.02, 0.04),
+        description=(
+            "phi, half-width of the boundary layer (v [m/s], omega [rad/s]): wider chatters less, tracks looser."
+        ),
+    )
 
 
 @pytree_dataclass
@@ -51,9 +72,9 @@ class SlidingModeTorque:
     """
 
     nominal: RobotParams
-    kc: FloatVector = (10.0, 10.0)
-    switching_gain: FloatVector = (1.0, 2.0)
-    boundary_layer: FloatVector = (0.02, 0.04)
+    kc: FloatVector = declared(SlidingModeParameters)
+    switching_gain: FloatVector = declared(SlidingModeParameters)
+    boundary_layer: FloatVector = declared(SlidingModeParameters)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()
