@@ -9,7 +9,9 @@ and body velocity; controllers read it through :func:`pose` and :func:`velocity`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import jax.numpy as jnp
 from jax import Array
 
 
@@ -37,9 +39,17 @@ class Layout:
         """The unit of ``name``."""
         return self.units[self.index(name)]
 
-    def read(self, vector: Array, name: str) -> Array:
-        """The entry ``name`` of ``vector`` (the last axis is the layout's)."""
+    def read(self, vector: Any, name: str) -> Any:
+        """The entry ``name`` of ``vector`` (a JAX or NumPy array whose last axis is the layout's)."""
         return vector[..., self.index(name)]
+
+    def take(self, vector: Any, *names: str) -> Array:
+        """The entries ``names`` of ``vector``, stacked in that order along its last axis."""
+        return jnp.stack([self.read(vector, name) for name in names], axis=-1)
+
+    def span(self, vector: Any, first: str, last: str) -> Any:
+        """The entries from ``first`` to ``last``, both included, of ``vector`` (the last axis), as one slice."""
+        return vector[..., self.index(first) : self.index(last) + 1]
 
     def columns(self, vectors: Array) -> dict[str, Array]:
         """Each channel of ``vectors`` (..., len(self)) by name."""
@@ -48,6 +58,8 @@ class Layout:
 
 #: what every plant shows its controller (measured, noise added) and what the errors and metrics read (true)
 BODY = Layout(("x", "y", "theta", "v", "omega"), ("m", "m", "rad", "m/s", "rad/s"))
+#: the posture error e_p = R(theta)^T (q_r - q) of the reference in the robot's frame (model.md §2.2)
+POSTURE_ERROR = Layout(("e_x", "e_y", "e_theta"), ("m", "m", "rad"))
 #: wheel torques, the input of a torque-driven plant
 WHEEL_TORQUES = Layout(("tau_r", "tau_l"), ("N m", "N m"))
 #: body velocity, the input of a velocity-driven plant

@@ -24,7 +24,7 @@ from .compilations import enable_compilation_cache as enable_compilation_cache  
 from .compilations import padded_length
 from .controllers import Controller, Emulator, TorqueLaw
 from .identification import Identification, identify
-from .layout import BODY, WHEEL_TORQUES
+from .layout import BODY, POSTURE_ERROR, WHEEL_TORQUES
 from .metrics import lost_path_warnings, summarize, tracking_error
 from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .model.sensed import ODOMETRY_ERROR
@@ -399,9 +399,9 @@ def _metric_series(
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
     result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
     series = {
-        "e_xy": result.error[..., :2],  # e_tr in NumPy on the host, as ddtrack.timeseries computes it
-        "v": result.state[..., 3],
-        "omega": result.state[..., 4],
+        "e_xy": POSTURE_ERROR.span(result.error, "e_x", "e_y"),  # e_tr in NumPy on the host, as timeseries does
+        "v": BODY.read(result.state, "v"),
+        "omega": BODY.read(result.state, "omega"),
     }  # for the grip the run needed
     series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
     series |= {name: value for name, value in result.plant_state.items() if name in WHEEL_SPINS}

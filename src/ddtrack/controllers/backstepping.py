@@ -11,10 +11,10 @@ from pydantic import Field
 
 from .._pytree import pytree_dataclass
 from ..geometry import error_rates, posture_error
-from ..layout import pose, velocity
+from ..layout import POSTURE_ERROR, pose, velocity
 from ..parameters import Parameters, Positive, Structure, declared
 from ..trajectories import Reference
-from .base import Logs, VelocityCommand
+from .base import Logs, VelocityCommand, commanded
 
 
 def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
@@ -22,14 +22,14 @@ def kanayama_command(error: Array, ref: Reference, gains: Array) -> Array:
 
     ``error`` = [e_x, e_y, e_theta] (model.md §2.2); ``gains`` = [Kx, Ky, Ktheta] > 0.
     """
-    e_x, e_y, e_th = error[0], error[1], error[2]
+    e_x, e_y, e_th = (POSTURE_ERROR.read(error, name) for name in POSTURE_ERROR.names)
     kx, ky, kth = gains[0], gains[1], gains[2]
     return jnp.stack([ref.v * jnp.cos(e_th) + kx * e_x, ref.omega + ref.v * (ky * e_y + kth * jnp.sin(e_th))])
 
 
 def kanayama_command_rate(error: Array, nu: Array, ref: Reference, gains: Array) -> Array:
     """Analytic d nu_c / dt with the gains held and the measured nu in the error dynamics (model.md §2.5)."""
-    e_y, e_th = error[1], error[2]
+    e_y, e_th = POSTURE_ERROR.read(error, "e_y"), POSTURE_ERROR.read(error, "e_theta")
     kx, ky, kth = gains[0], gains[1], gains[2]
     de_x, de_y, de_th = error_rates(error, nu[0], nu[1], ref.v, ref.omega)
     v_dot = ref.v_dot * jnp.cos(e_th) - ref.v * jnp.sin(e_th) * de_th + kx * de_x
@@ -133,5 +133,5 @@ class Backstepping:
         return (
             command.nu_c,
             memory,
-            {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated, **logs},
+            {**commanded(command.nu_c), "saturated": command.saturated, **logs},
         )

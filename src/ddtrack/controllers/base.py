@@ -18,9 +18,15 @@ import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass
+from ..layout import VELOCITY_COMMAND
 from ..trajectories import Reference
 
 Logs = dict[str, Array]
+
+
+def commanded(nu_c: Array) -> Logs:
+    """The logs of a velocity command (v_c, omega_c) [m/s, rad/s]: ``v_cmd`` and ``omega_cmd``, read by name."""
+    return {f"{name}_cmd": VELOCITY_COMMAND.read(nu_c, name) for name in VELOCITY_COMMAND.names}
 
 
 class Controller(Protocol):
@@ -101,8 +107,7 @@ class Cascade:
         saturated = jnp.maximum(command.saturated, torque_saturated)
         outer_memory = self.outer.observe(outer_memory, saturated)
         logs = {
-            "v_cmd": command.nu_c[0],
-            "omega_cmd": command.nu_c[1],
+            **commanded(command.nu_c),
             "saturated": saturated,
             **outer_logs,
             **inner_logs,
@@ -129,5 +134,5 @@ class VelocityOutput:
     def step(self, t: Array, y: Array, ref: Reference, memory: Any) -> tuple[Array, Any, Logs]:
         command, memory, outer_logs = self.outer.command(t, y, ref, memory)
         memory = self.outer.observe(memory, command.saturated)
-        logs = {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated, **outer_logs}
+        logs = {**commanded(command.nu_c), "saturated": command.saturated, **outer_logs}
         return command.nu_c, memory, logs

@@ -10,7 +10,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass
 from ..trajectories import Reference
-from .base import Logs
+from .base import Logs, commanded
 
 #: [s] relative slack (at least 1 ns) under which a row's time counts as reached: t = k T_c picks row k even when
 #: k T_c rounds a few ulps below the row's time
@@ -48,4 +48,4 @@ class Replay:
 
     def step(self, t: Array, y: Array, ref: Reference, memory: tuple[()]) -> tuple[Array, tuple[()], Logs]:
         nu_c = self.command_at(t)
-        return nu_c, memory, {"v_cmd": nu_c[0], "omega_cmd": nu_c[1], "saturated": jnp.zeros((), nu_c.dtype)}
+        return nu_c, memory, {**commanded(nu_c), "saturated": jnp.zeros((), nu_c.dtype)}

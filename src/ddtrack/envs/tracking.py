@@ -82,7 +82,7 @@ from .._pytree import pytree_dataclass
 from ..controllers import NNAdaptiveParameters
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
-from ..layout import pose, velocity
+from ..layout import BODY, Layout, pose, velocity
 from ..precision import enable_float64
 from ..runner import prepare
 from ..scenario import (
@@ -145,6 +145,11 @@ class HeldTorques:
 def _gains(episode: _Episode, action: Array) -> Array:
     """Gains (Kx, Ky, Ktheta) of an action in [-1, 1]^3: K0 exactly at 0, log-linear to the bounds at +-1."""
     return episode.gain_anchor * jnp.exp(action * jnp.where(action >= 0, episode.gain_log_up, episode.gain_log_down))
+
+
+#: what :func:`_step` packs after the observation: the plant's input u (N m or m/s), the BODY of x_{k+1}, the gains
+PACKED = Layout(("reward", "status", "e_tr", "u_0", "u_1", *BODY.names, "kx", "ky", "ktheta"),
+                ("", "", "m", "", "", *BODY.units, "1/s", "1/m^2", "1/m"))  # fmt: skip
 
 
 def _observe(episode: _Episode, x: Array, k: Array, gains: Array | None) -> tuple[Array, Array, Array]:
@@ -401,9 +406,9 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         )
         self._k += 1
         host = np.asarray(packed)
-        n = self._n_obs
-        observation = host[:n].astype(np.float32)
-        reward, status, e_tr = float(host[n]), STATUS_NAMES[int(host[n + 1])], float(host[n + 2])
+        observation, tail = host[: self._n_obs].astype(np.float32), host[self._n_obs :]
+        reward, e_tr = float(PACKED.read(tail, "reward")), float(PACKED.read(tail, "e_tr"))
+        status = STATUS_NAMES[int(PACKED.read(tail, "status"))]
         terminated = status != "ok"
         truncated = not terminated and self._k >= self.scenario.simulation.n_steps
         self._done = terminated or truncated
@@ -411,12 +416,12 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             "t": self._k * self.scenario.simulation.control_period,
             "status": status,
             "e_tr": e_tr,
-            "state": host[n + 5 : n + 10].copy(),
+            "state": PACKED.span(tail, "x", "omega").copy(),
             "seed": self._seed,
-            "control": host[n + 3 : n + 5].copy(),
+            "control": PACKED.span(tail, "u_0", "u_1").copy(),
         }
         if self._gains_mode:
-            info["gains"] = host[n + 10 : n + 13].copy()
+            info["gains"] = PACKED.span(tail, "kx", "ktheta").copy()
         return observation, reward, terminated, truncated, info
 
     # --- helpers --------------------------------------------------------------------------------

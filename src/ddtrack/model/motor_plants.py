@@ -103,7 +103,7 @@ class TorqueDrivenPlant(ODEPlant):
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """``tau_r``, ``tau_l`` [N m] applied, ``i_r``, ``i_l`` [A] drawn and ``u_r``, ``u_l`` [V] across the armatures
         at the start of the period."""
-        return _motor_logs(self.motor, *self.applied(x, u), wheel_speeds(self.params, x[3:5]))
+        return _motor_logs(self.motor, *self.applied(x, u), wheel_speeds(self.params, velocity(x)))
 
 
 def cruise_integral(params: RobotParams, driver: VelocityDriver, nu: Array) -> Array:
@@ -161,7 +161,9 @@ class VelocityDrivenPlant(ODEPlant):
 
     def applied(self, x: Array, u: Array) -> tuple[Array, Array]:
         """(torques [N m], currents [A]) the driver gives at state ``x`` under the command ``u``, each (2,)."""
-        tau, current, _, _ = self.driver.output(x[len(BODY) :], self.setpoints(u), wheel_speeds(self.params, x[3:5]))
+        tau, current, _, _ = self.driver.output(
+            x[len(BODY) :], self.setpoints(u), wheel_speeds(self.params, velocity(x))
+        )
         return tau, current
 
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
@@ -179,7 +181,7 @@ class VelocityDrivenPlant(ODEPlant):
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """``tau_r``, ``tau_l`` [N m] applied, ``i_r``, ``i_l`` [A] drawn and ``u_r``, ``u_l`` [V] across the armatures
         at the start of the period."""
-        return _motor_logs(self.driver.motor, *self.applied(x, u), wheel_speeds(self.params, x[3:5]))
+        return _motor_logs(self.driver.motor, *self.applied(x, u), wheel_speeds(self.params, velocity(x)))
 
 
 T = TypeVar("T")

@@ -31,7 +31,7 @@ from pydantic import Field
 
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4
-from ..layout import BODY, Layout, velocity
+from ..layout import BODY, Layout, pose_vector, velocity
 from ..parameters import NonNegative, Parameters, Structure, declared, declared_fields
 from .plants import ODEPlant
 from .sensing import encoder_angle, odometry_step, split_delay
@@ -299,7 +299,7 @@ class SensedPlant:
         assert self.noise_key is not None, "a fix needs its key (Sensing.wrap gives it)"
         xi = jax.random.normal(jax.random.fold_in(self.noise_key, clock.astype(jnp.int32)), (3,))
         noise = jnp.stack([self.fix_position_std * xi[0], self.fix_position_std * xi[1], self.fix_heading_std * xi[2]])
-        gap = body[:3] + noise - estimate[:3]
+        gap = pose_vector(body) + noise - pose_vector(estimate)
         gap = gap.at[2].set(jnp.arctan2(jnp.sin(gap[2]), jnp.cos(gap[2])))  # the short way round
         due = jnp.mod(clock, self.fix_periods) == 0
         return estimate.at[:3].add(jnp.where(due, self.fix_gain, 0.0) * gap)
@@ -318,7 +318,7 @@ class SensedPlant:
         inner, _, estimate, _, _ = self.split(x)
         logs = self.inner.logged(inner, self.stretches(x, u)[1][0][0])
         if self.odometry:
-            error = estimate[:3] - self.inner.observe(inner)[:3]
+            error = pose_vector(estimate) - pose_vector(self.inner.observe(inner))
             logs = logs | ODOMETRY_ERROR.columns(error)
         return logs
 

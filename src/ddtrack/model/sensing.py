@@ -23,6 +23,8 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from ..layout import pose_vector
+
 SERIES_BELOW = 1e-4  #: |a| [rad] under which sin(a) / a is its Taylor series (error below 1e-22)
 COUNT_SLACK = 8.0 * 2.0**-52  #: relative slack under which a count boundary counts as reached (a few ulps)
 
@@ -200,5 +202,5 @@ def odometry_step(
     """
     distance, wheel_turn = body_increments(increments, wheel_radius, half_axle)
     turn = wheel_turn if turn is None else turn
-    pose = arc_pose(estimate[:3], distance, turn)
+    pose = arc_pose(pose_vector(estimate), distance, turn)
     return jnp.concatenate([pose, jnp.stack([distance / period, turn / period])])

@@ -40,7 +40,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4, rosenbrock2
-from ..layout import WHEEL_TORQUES, Layout
+from ..layout import WHEEL_TORQUES, Layout, pose_vector, velocity
 from .dynamics import wheel_friction
 from .motors import DCMotor, drive_torque
 from .params import RobotParams
@@ -51,6 +51,13 @@ SLIP_STATE = Layout(
     ("x", "y", "theta", "u", "w", "r", "phidot_r", "phidot_l"),
     ("m", "m", "rad", "m/s", "m/s", "rad/s", "rad/s", "rad/s"),
 )
+
+
+def wheel_spins(x: Array) -> Array:
+    """(phidot_R, phidot_L) [rad/s] of a :data:`SLIP_STATE` vector (or one that begins with it)."""
+    return SLIP_STATE.span(x, "phidot_r", "phidot_l")
+
+
 #: what it logs each period: applied torques (named as DynamicPlant's), slip speeds, the floor's forces and loads
 SLIP_LOGS = Layout(
     ("tau_r", "tau_l", "slip_r", "slip_l", "slip_lateral", "force_rx", "force_lx", "force_y", "normal_r", "normal_l"),
@@ -130,14 +137,14 @@ class SlipPlant:
 
     def init(self, body: Array) -> Array:
         """BODY [x, y, theta, v, omega] with no lateral speed and the wheels rolling without slip."""
-        v, omega = body[3], body[4]
+        v, omega = velocity(body)
         p = self.params
         spin = jnp.stack([v + p.half_axle * omega, v - p.half_axle * omega]) / p.wheel_radius
-        return jnp.concatenate([body[:3], jnp.stack([v, jnp.zeros_like(v), omega]), spin])
+        return jnp.concatenate([pose_vector(body), jnp.stack([v, jnp.zeros_like(v), omega]), spin])
 
     def observe(self, x: Array) -> Array:
         """BODY [x, y, theta, u, r]: the pose of A, its forward speed and the yaw rate."""
-        return jnp.stack([x[0], x[1], x[2], x[3], x[5]])
+        return SLIP_STATE.take(x, "x", "y", "theta", "u", "r")
 
     def saturate(self, u: Array) -> Array:
         """The command within +-max_torque, or +-the motor's stall torque (the speed-dependent limit acts in the
@@ -149,13 +156,14 @@ class SlipPlant:
         """The wheel torques [N m] at state ``x`` under the command ``u``: through the motor's driver if any."""
         if self.motor is None:
             return u
-        return drive_torque(self.motor, u, x[6:8], self.pwm_model)[0]
+        return drive_torque(self.motor, u, wheel_spins(x), self.pwm_model)[0]
 
     def slips(self, x: Array) -> tuple[Array, Array, Array]:
         """(longitudinal slip of the right and left contact, lateral slip w) [m/s]."""
         p = self.params
-        u, w, r = x[3], x[4], x[5]
-        return u + p.half_axle * r - p.wheel_radius * x[6], u - p.half_axle * r - p.wheel_radius * x[7], w
+        u, w, r = (SLIP_STATE.read(x, name) for name in ("u", "w", "r"))
+        spin_r, spin_l = wheel_spins(x)
+        return u + p.half_axle * r - p.wheel_radius * spin_r, u - p.half_axle * r - p.wheel_radius * spin_l, w
 
     def normals(self, x: Array) -> tuple[Array, Array]:
         """(N_R, N_L) [N]: each drive wheel's load, the static share moved by the body's acceleration.
@@ -192,13 +200,13 @@ class SlipPlant:
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
         """The state's rate under the wheel torque command ``u`` and disturbance torques ``tau_dist`` [N m]."""
         p = self.params
-        theta, fwd, lat, r = x[2], x[3], x[4], x[5]
+        theta, fwd, lat, r = (SLIP_STATE.read(x, name) for name in ("theta", "u", "w", "r"))
         f_rx, f_ry, f_lx, f_ly = self.forces(x)
         f_x, f_y = f_rx + f_lx, f_ry + f_ly
         r_dot = (p.half_axle * (f_rx - f_lx) - p.com_offset * f_y) / p.inertia
         u_dot = f_x / p.mass + r * lat + p.com_offset * r**2
         w_dot = f_y / p.mass - p.com_offset * r_dot - r * fwd
-        drive = self.applied(x, u) - wheel_friction(p, x[6:8]) - tau_dist
+        drive = self.applied(x, u) - wheel_friction(p, wheel_spins(x)) - tau_dist
         spin_dot = (drive - p.wheel_radius * jnp.stack([f_rx, f_lx])) / p.wheel_inertia
         c, s = jnp.cos(theta), jnp.sin(theta)
         pose_dot = jnp.stack([fwd * c - lat * s, fwd * s + lat * c, r])

@@ -21,7 +21,7 @@ from .dynamics import wheel_speeds
 from .motor_plants import armature_voltage, cruise_integral
 from .motors import VelocityDriver
 from .params import RobotParams
-from .slip import SLIP_LOGS, SLIP_STATE, SlipPlant, broadcast_like, check_drawn, slip_integration
+from .slip import SLIP_LOGS, SLIP_STATE, SlipPlant, broadcast_like, check_drawn, slip_integration, wheel_spins
 
 #: the state of :class:`SlipVelocityPlant`: the slip plant's, then the integral of each wheel's speed error
 SLIP_VELOCITY_STATE = Layout((*SLIP_STATE.names, "pi_r", "pi_l"), (*SLIP_STATE.units, "rad", "rad"))
@@ -85,13 +85,13 @@ class SlipVelocityPlant:
     def applied(self, x: Array, u: Array) -> tuple[Array, Array]:
         """(torques [N m], currents [A]) the loop gives at state ``x`` under the command ``u``, each (2,)."""
         setpoint = wheel_speeds(self.params, u)
-        tau, current, _, _ = self.driver.output(x[_SLIP:], setpoint, x[6:8])
+        tau, current, _, _ = self.driver.output(x[_SLIP:], setpoint, wheel_spins(x))
         return tau, current
 
     def derivative(self, x: Array, u: Array, tau_dist: Array) -> Array:
         """[slip plant's rates, integrals' rates] under the loop's torques."""
         tau, _ = self.applied(x, u)
-        integral_rate = self.driver.integral_rate(x[_SLIP:], wheel_speeds(self.params, u), x[6:8])
+        integral_rate = self.driver.integral_rate(x[_SLIP:], wheel_speeds(self.params, u), wheel_spins(x))
         return jnp.concatenate([self.slip.derivative(x[:_SLIP], tau, tau_dist), integral_rate])
 
     def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
@@ -109,7 +109,7 @@ class SlipVelocityPlant:
         """Applied torques, currents, slip speeds and the floor's forces at the start of the period."""
         tau, current = self.applied(x, u)
         floor = self.slip.logged(x[:_SLIP], tau)
-        voltage = armature_voltage(self.driver.motor, current, x[6:8])
+        voltage = armature_voltage(self.driver.motor, current, wheel_spins(x))
         return floor | {"i_r": current[0], "i_l": current[1], "u_r": voltage[0], "u_l": voltage[1]}
 
 

@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, model_validator
 
 from ..errors import ConfigError, did_you_mean
+from ..layout import BODY
 from ..model import MeasurementNoise, RobotParams, WheelDisturbance
 from ..model.params import RobotParameters
 from ._base import (
@@ -383,8 +384,9 @@ class NoiseConfig(_Section):
     yaw_rate_std: NonNegative = Field(0.0, description="On omega [rad/s].")
 
     def build(self) -> MeasurementNoise:
-        p, h = self.position_std, self.heading_std
-        return MeasurementNoise(std=(p, p, h, self.velocity_std, self.yaw_rate_std))
+        p = self.position_std
+        std = {"x": p, "y": p, "theta": self.heading_std, "v": self.velocity_std, "omega": self.yaw_rate_std}
+        return MeasurementNoise(std=tuple(std[name] for name in BODY.names))
 
 
 # --- [initial] -------------------------------------------------------------------------------

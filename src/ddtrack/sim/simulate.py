@@ -11,7 +11,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
 from ..geometry import posture_error
-from ..layout import BODY, WHEEL_TORQUES, Layout, pose, velocity
+from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..precision import require_float64
 from ..trajectories import Trajectory
@@ -111,7 +111,8 @@ def period_status(
     error (model.md §2.2); ``u`` the saturated input (:func:`plant_period`).
     """
     finite = jnp.all(jnp.isfinite(x_next)) & jnp.all(jnp.isfinite(u))
-    too_far = (jnp.hypot(error[0], error[1]) > divergence_error) | jnp.any(jnp.abs(velocity(body)) > divergence_speed)
+    e_x, e_y = POSTURE_ERROR.read(error, "e_x"), POSTURE_ERROR.read(error, "e_y")
+    too_far = (jnp.hypot(e_x, e_y) > divergence_error) | jnp.any(jnp.abs(velocity(body)) > divergence_speed)
     return jnp.where(finite, jnp.where(too_far, 1, 0), 2)
 
 
@@ -271,7 +272,8 @@ def measured(plant: Plant, x: Array) -> Array:
 def commanded(plant: Plant, u: Array) -> dict[str, Array]:
     """The held command of a velocity-driven plant as ``v_cmd`` [m/s], ``omega_cmd`` [rad/s] (a controller's own
     logs of them take precedence); nothing for other inputs: a torque plant logs the torques it applied itself."""
-    return {"v_cmd": u[0], "omega_cmd": u[1]} if plant.input_kind == "velocity" else {}
+    commanded = {"v_cmd": VELOCITY_COMMAND.read(u, "v"), "omega_cmd": VELOCITY_COMMAND.read(u, "omega")}
+    return commanded if plant.input_kind == "velocity" else {}
 
 
 def recorded(plant: Plant) -> Layout:

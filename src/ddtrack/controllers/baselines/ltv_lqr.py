@@ -37,7 +37,7 @@ from ...layout import pose, velocity
 from ...parameters import Parameters, Positive, PositiveTriple, Structure, declared
 from ...trajectories import Reference
 from ..backstepping import VelocityClamps, clamp_command
-from ..base import Logs, VelocityCommand
+from ..base import Logs, VelocityCommand, commanded
 
 
 def unicycle_error_model(v: Array, control_period: float) -> tuple[Array, Array]:
@@ -154,5 +154,5 @@ class LTVUnicycleLQR:
         return (
             command.nu_c,
             memory,
-            {"v_cmd": command.nu_c[0], "omega_cmd": command.nu_c[1], "saturated": command.saturated},
+            {**commanded(command.nu_c), "saturated": command.saturated},
         )

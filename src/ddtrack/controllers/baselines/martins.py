@@ -45,7 +45,7 @@ from ...model.lag import PIONEER_3DX_WITH_LASER
 from ...parameters import NonNegative, Parameters, Positive, Structure, declared
 from ...trajectories import Reference
 from ..backstepping import Backstepping
-from ..base import Logs
+from ..base import Logs, commanded
 
 #: the log names of theta_hat_1..theta_hat_6 [s, s, s m/rad^2, 1, s/m, 1]
 THETA_LOGS = tuple(f"theta{i}_hat" for i in range(1, 7))
@@ -176,8 +176,7 @@ class AdaptiveDynamicCompensator:
         theta_next = jnp.where(saturated > 0.0, memory.theta_hat, memory.theta_hat + self.control_period * rate)
         updated = CompensatorMemory(theta_next, command.nu_c)
         logs = {
-            "v_cmd": command.nu_c[0],
-            "omega_cmd": command.nu_c[1],
+            **commanded(command.nu_c),
             "saturated": saturated,
             **outer_logs,
             **{name: memory.theta_hat[i] for i, name in enumerate(THETA_LOGS)},
