@@ -4,7 +4,7 @@ For each model (lag, body, motor) a 60 s synthetic log at 200 Hz of a known robo
 new noise: the first fit compiles (cold), the second reuses the compiled programs (warm, what a second log in the
 same session costs). Printed: wall and CPU seconds of each fit (CPU counts every core the fit kept busy).
 
-    python bench/identify_speed.py [--json]
+    python bench/identify_speed.py [--json] [--model motor]
 """
 
 from __future__ import annotations
@@ -100,6 +100,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--cli", action="store_true", help="time two ddtrack identify processes on the motor log")
+    parser.add_argument(
+        "--model", choices=("lag", "body", "motor"), action="append", help="only this model (repeatable)"
+    )
     args = parser.parse_args()
     enable_float64()
     if args.cli:
@@ -109,6 +112,8 @@ def main() -> None:
         return
     results = {}
     for name, fit in fits().items():
+        if args.model and name not in args.model:
+            continue
         (cold_wall, cold_cpu), (warm_wall, warm_cpu) = fit(0), fit(1)
         results[name] = {"cold_wall": cold_wall, "cold_cpu": cold_cpu, "warm_wall": warm_wall, "warm_cpu": warm_cpu}
         if not args.json:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -23,7 +22,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .output_error import SUBSTEPS, WINDOW, OutputError, Record, output_error
-from .schedule import held_at, schedule, simulate_jit, slots_for
+from .schedule import held_at, program, schedule, simulate_jit, slots_for
 
 HELD_OUT = 0.25  #: the last quarter of the log is not fitted: it tells how well the model predicts
 MAX_SUBSTEPS = 64
@@ -31,6 +30,8 @@ MAX_SUBSTEPS = 64
 #: small robot's 1/eps_f slope reaches 1600 1/s), and beyond RK4's stability (2.79) the tangents of jacfwd blow up
 STIFF_STEP = 0.5
 MIN_SAMPLES = 80
+#: intervals per call of the compiled simulation, the last call padded: every length of log shares one program
+CHUNK = 1024
 #: [s] how far the screening looks for speeds that answer their inputs before they were sent (clocks apart)
 LEAD = 1.0
 #: [s] the screening's coarse grid: a log faster than 100 Hz is screened on it first, then on half samples around
@@ -307,8 +308,14 @@ def simulate(
     t = np.asarray(t, dtype=float)
     sent_t, values = (t, np.asarray(inputs, dtype=float)) if sent is None else sent
     scheduled = schedule(t, sent_t, values, delay, slots_for(t, sent_t))
-    args = (jnp.asarray(params), delay, jnp.asarray(start), tuple(jnp.asarray(a) for a in scheduled))
-    return np.asarray(simulate_jit(model.rate, *args, interval_mean, substeps))
+    n = len(scheduled.step)
+    padded = [np.concatenate([a, np.zeros((-n % CHUNK, *a.shape[1:]), a.dtype)]) for a in scheduled]  # held: h = 0
+    state, samples = jnp.asarray(start), [jnp.asarray(start)[None]]
+    for i in range(0, n, CHUNK):  # the chunks one after another, each from the last one's state
+        chunk = tuple(jnp.asarray(a[i : i + CHUNK]) for a in padded)
+        state, speeds = simulate_jit(model.rate, jnp.asarray(params), delay, state, chunk, interval_mean, substeps)
+        samples.append(speeds)
+    return np.asarray(jnp.concatenate(samples))[: n + 1]
 
 
 def substeps_for(model: SpeedModel, params: np.ndarray, speed: np.ndarray, step: float) -> int:
@@ -322,7 +329,7 @@ def substeps_for(model: SpeedModel, params: np.ndarray, speed: np.ndarray, step:
     return int(np.clip(2 ** np.ceil(np.log2(needed)), SUBSTEPS, MAX_SUBSTEPS))
 
 
-@partial(jax.jit, static_argnums=0)
+@program(0)
 def _speed_jacobians(rate, params, points):
     return jax.vmap(jax.jacfwd(lambda s: rate(params, s, jnp.zeros(2))))(points)
 

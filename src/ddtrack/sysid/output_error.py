@@ -8,14 +8,13 @@ model's: its Jacobian column comes from the same forward-mode pass through each 
 
 from __future__ import annotations
 
-from functools import partial
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .schedule import CORNER, Schedule, nearest_corner, schedule, simulate_schedule
+from .schedule import CORNER, Schedule, nearest_corner, program, schedule, simulate_schedule, used_segments
 
 if TYPE_CHECKING:
     from .fit import SpeedModel
@@ -72,34 +71,38 @@ def windowed(scheduled: Schedule, windows: Windows) -> tuple[jax.Array, ...]:
     )
 
 
-def _window_residuals(rate, interval_mean, substeps, free, params, delay, weights, start, scheduled, measured, mask):
-    """One window simulated from its own start, minus the measured speeds, over each channel's spread: (2 m,), zero
-    on padding. ``free``: the delay is ``params``' last entry (else ``delay`` is fixed)."""
+def _window_errors(rate, interval_mean, substeps, free, params, delay, start, scheduled, measured, mask, used):
+    """One window simulated from its own start, minus the measured speeds: (2 m,), zero on padding. ``free``: the
+    delay is ``params``' last entry (else ``delay`` is fixed). Unweighted: the fit divides by each channel's spread
+    outside, so a re-weighting reuses the errors and their Jacobian."""
     model, delay = (params[:-1], params[-1]) if free else (params, delay)
-    simulated = simulate_schedule(rate, model, delay, start, scheduled, interval_mean, substeps)
-    return ((simulated - measured) / weights * mask[:, None]).ravel()
+    simulated = simulate_schedule(rate, model, delay, start, scheduled, interval_mean, substeps, used)
+    return ((simulated - measured) * mask[:, None]).ravel()
 
 
-@partial(jax.jit, static_argnums=(0, 2, 3))
-def _residuals(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask, weights):
-    """Every window's residuals, (k, 2 m), the windows simulated side by side."""
+@program(0, 2, 3)
+def _residuals(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask):
+    """Every window's errors, (k, 2 m), the windows simulated side by side."""
+
+    used = used_segments(scheduled[3])
 
     def one(start, window, speeds, logged):
-        return _window_residuals(
-            rate, interval_mean, substeps, free, params, delay, weights, start, window, speeds, logged
-        )
+        return _window_errors(rate, interval_mean, substeps, free, params, delay, start, window, speeds, logged, used)
 
     return jax.vmap(one)(starts, scheduled, measured, mask)
 
 
-@partial(jax.jit, static_argnums=(0, 2, 3))
-def _jacobians(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask, weights):
-    """Each window's exact Jacobian (forward mode through its simulation) on the parameters (the delay last when
-    free), (k, 2 m, p), and on its own start, (k, 2 m, 2): a window's residuals depend on no other window's start."""
+@program(0, 2, 3)
+def _jacobians(rate, interval_mean, substeps, free, params, delay, starts, scheduled, measured, mask):
+    """Each window's exact Jacobian of its errors (forward mode through its simulation) on the parameters (the
+    delay last when free), (k, 2 m, p), and on its own start, (k, 2 m, 2): a window's errors depend on no other
+    window's start."""
+
+    used = used_segments(scheduled[3])
 
     def one(start, window, speeds, logged):
         def f(p, s):
-            return _window_residuals(rate, interval_mean, substeps, free, p, delay, weights, s, window, speeds, logged)
+            return _window_errors(rate, interval_mean, substeps, free, p, delay, s, window, speeds, logged, used)
 
         return jax.jacfwd(f, argnums=(0, 1))(params, start)
 
@@ -242,25 +245,40 @@ def output_error(
         starts = jnp.asarray(q[n_params:].reshape(count, 2))
         return jnp.asarray(params), delay, starts, scheduled, measured, mask
 
-    def residual_fn(q: np.ndarray, w: jax.Array) -> np.ndarray:  # q = (params, delay, each window's start speeds)
-        return np.asarray(_residuals(model.rate, interval_mean, substeps, free, *args(q), w)).ravel()
+    last: dict[str, tuple[bytes, tuple[np.ndarray, ...]]] = {}  # "r" and "J": the q last evaluated at, its values
 
-    def jacobian_fn(q: np.ndarray, w: jax.Array) -> tuple[np.ndarray, np.ndarray]:
-        j = _jacobians(model.rate, interval_mean, substeps, free, *args(q, CORNER), w)
-        return np.asarray(j[0]), np.asarray(j[1])
+    def evaluated(kind: str, q: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The unweighted errors ("r") or their Jacobians ("J") at q, computed once: a pass's re-weighting and the
+        covariance at the end are taken where the last linearisation stands."""
+        if kind not in last or last[kind][0] != q.tobytes():
+            if kind == "r":
+                values: tuple = (_residuals(model.rate, interval_mean, substeps, free, *args(q)),)
+            else:
+                values = _jacobians(model.rate, interval_mean, substeps, free, *args(q, CORNER))
+            last[kind] = q.tobytes(), tuple(np.asarray(v) for v in values)
+        return last[kind][1]
+
+    # each channel times the inverse of its spread: the very rounding of the division XLA made when it was inside
+    def residual_fn(q: np.ndarray, w: np.ndarray) -> np.ndarray:  # q = (params, delay, each window's start speeds)
+        return (evaluated("r", q)[0].reshape(count, -1, 2) * (1.0 / w)).ravel()
+
+    def jacobian_fn(q: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rows = np.tile(1.0 / w, len(windows.mask[0]))[:, None]  # a window's rows alternate v, omega
+        j_params, j_starts = evaluated("J", q)
+        return j_params * rows, j_starts * rows
 
     positive = list(model.positive)
     q = np.concatenate([start, [delay] if free else [], windows.speed[:, 0].ravel()])
     q[positive] = np.maximum(q[positive], 1e-3 * np.maximum(np.abs(q[positive]).max(), 1e-6))
     spread = np.maximum(np.std(speed, axis=0) * 0.01, 1e-6)  # first weights; re-estimated from the residuals
-    if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # noisy coupling terms can make it blow up
+    if not np.all(np.isfinite(residual_fn(q, spread))):  # noisy coupling terms can make it blow up
         q[list(model.couplings)] = 0.0
-    if not np.all(np.isfinite(residual_fn(q, jnp.asarray(spread)))):  # no fit from here
+    if not np.all(np.isfinite(residual_fn(q, spread))):  # no fit from here
         return _failed(q[:n_model], count, substeps, delay)
     logged = windows.mask.ravel() > 0
     dof = 2 * int(logged.sum()) - q.size  # the windows' starts are fitted too
     for still in (STILL_FIRST, STILL):  # fit, re-weight each channel by its residual spread, fit again
-        weights = jnp.asarray(spread)
+        weights = spread  # this pass's; the pass ends with new spreads
         damping, r = 1e-3, residual_fn(q, weights)
         linearised: tuple[Blocks, Gradient, np.ndarray] | None = None  # J^T J, J^T r and the standard errors at q
         crossed = pinned = None  # the corner the last step crossed; the delay held at a corner it bounced across
@@ -305,8 +323,8 @@ def output_error(
             if damping > 1e9:
                 break
         spread = np.maximum(np.std((r.reshape(-1, 2) * np.asarray(weights))[logged], axis=0), 1e-9)
-    r = residual_fn(q, jnp.asarray(spread))
-    jacobians = jacobian_fn(q, jnp.asarray(spread))
+    r = residual_fn(q, spread)
+    jacobians = jacobian_fn(q, spread)
     cost = float(np.sum(spread**2 / np.var(speed, axis=0)))
     fitted_delay = float(q[n_model]) if free else delay
     if not (np.all(np.isfinite(r)) and all(np.all(np.isfinite(j)) for j in jacobians)):

@@ -13,8 +13,9 @@ continuous across them: the fit moves d like any other parameter.
 
 from __future__ import annotations
 
-from functools import partial
-from typing import NamedTuple
+from collections.abc import Callable
+from functools import cache, cached_property
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +26,41 @@ from ..integrators import rk4_step
 #: [s] the delay is nudged by this before a Jacobian: at a switch exactly on a measurement stamp (equal rates, a
 #: delay of whole samples) the simulation has a corner in d, and its right derivative is the one that moves it
 CORNER = 1e-9
+#: XLA's YNN fusions hand each small matrix product (the body model's 2x2 input map) to a library, and inside the
+#: simulation's innermost loop the call costs more than the product: the fit's programs leave them off (results
+#: bit-identical; the windows' residuals took less than half the time on 2026-11-29).
+NO_YNN = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+@cache
+def compiler_options() -> dict[str, str]:
+    """:data:`NO_YNN` where this jax and XLA know the option (a trivial program compiled to ask), else none."""
+    try:
+        jax.jit(lambda x: x, compiler_options=NO_YNN)(0.0)
+    except (TypeError, RuntimeError):  # an older jax or XLA: no such option, and no YNN fusions to turn off
+        return {}
+    return NO_YNN
+
+
+class Program:
+    """``fn`` jitted with :func:`compiler_options`, at its first call (so that importing asks XLA nothing)."""
+
+    def __init__(self, fn: Callable, static_argnums: tuple[int, ...]) -> None:
+        self.fn, self.static_argnums = fn, static_argnums
+        self.__doc__ = fn.__doc__
+
+    @cached_property
+    def jitted(self) -> Any:
+        options: dict[str, Any] = {"compiler_options": compiler_options()} if compiler_options() else {}
+        return jax.jit(self.fn, static_argnums=self.static_argnums, **options)
+
+    def __call__(self, *args: Any) -> Any:
+        return self.jitted(*args)
+
+
+def program(*static_argnums: int) -> Callable[[Callable], Program]:
+    """Decorate a function as a :class:`Program` with these static arguments."""
+    return lambda fn: Program(fn, static_argnums)
 
 
 class Schedule(NamedTuple):
@@ -86,20 +122,28 @@ def schedule(t: np.ndarray, sent_t: np.ndarray, sent: np.ndarray, delay: float, 
     return Schedule(t[:-1], np.diff(t), np.where(valid, sent_t[index], 0.0), valid, sent[segments])
 
 
-def simulate_schedule(rate, params, delay, start, scheduled, interval_mean, substeps):
-    """(v, omega) at t_0 (``start``) and at the end of each interval of ``scheduled`` (JAX arrays of a
-    :class:`Schedule`, any leading shape the caller vmaps away), ``substeps`` RK4 steps per segment; with
-    ``interval_mean``, each sample after the first is the mean over the interval ending at it."""
+def used_segments(valid: jax.Array) -> jax.Array:
+    """How many of each interval's segments are integrated: 1 + its switches inside (``valid``, (..., n - 1,
+    slots - 1)), the most over the leading axes (windows simulated side by side take one loop). The others have
+    zero length: an RK4 step of h = 0 leaves the state, its tangents and the area as they are, bit for bit."""
+    count = jnp.sum(valid, axis=-1)
+    return 1 + count.reshape(-1, count.shape[-1]).max(axis=0)
+
+
+def _intervals(rate, params, delay, start, scheduled, interval_mean, substeps, used):
+    """The state after every interval of ``scheduled`` from ``start``, and each interval's sample (its end's state,
+    or with ``interval_mean`` the mean over it); ``used``: :func:`used_segments`."""
 
     def interval(speed, segments):
-        t0, h_all, switch, valid, inputs = segments
+        (t0, h_all, switch, valid, inputs), n = segments
         t1 = t0 + h_all
         bounds = jnp.clip(jnp.where(valid, switch + delay, t1), t0, t1)
         lengths = jnp.diff(jnp.concatenate([t0[None], bounds, t1[None]]))
 
-        def segment(s, piece):
-            h, u = piece
-            f = lambda x: rate(params, x, u)  # noqa: E731
+        def segment(i, carry):
+            s, areas = carry
+            h = lengths[i]
+            f = lambda x: rate(params, x, inputs[i])  # noqa: E731
 
             def substep(x, _):
                 after = rk4_step(f, x, h / substeps)
@@ -107,17 +151,28 @@ def simulate_schedule(rate, params, delay, start, scheduled, interval_mean, subs
 
             after, path = jax.lax.scan(substep, s, None, length=substeps)
             area = h * (0.5 * s + path[:-1].sum(axis=0) + 0.5 * after) / substeps  # trapezoid over the substeps
-            return after, area
+            return after, areas + area
 
-        after, areas = jax.lax.scan(segment, speed, (lengths, inputs))
-        mean = jnp.where(h_all > 0, areas.sum(axis=0) / jnp.where(h_all > 0, h_all, 1.0), after)
+        # the used segments only: a schedule that holds the most switches any delay could put in an interval (3
+        # slots where the streams share their stamps) mostly pads with zero-length ones, which cost as much
+        after, areas = jax.lax.fori_loop(0, n, segment, (speed, jnp.zeros_like(speed)))
+        mean = jnp.where(h_all > 0, areas / jnp.where(h_all > 0, h_all, 1.0), after)
         return after, jnp.where(interval_mean, mean, after)  # a select, not a branch: one program serves both readings
 
-    _, speeds = jax.lax.scan(interval, start, scheduled)
+    return jax.lax.scan(interval, start, (scheduled, used))
+
+
+def simulate_schedule(rate, params, delay, start, scheduled, interval_mean, substeps, used):
+    """(v, omega) at t_0 (``start``) and at the end of each interval of ``scheduled`` (JAX arrays of a
+    :class:`Schedule`, any leading shape the caller vmaps away), ``substeps`` RK4 steps per segment; with
+    ``interval_mean``, each sample after the first is the mean over the interval ending at it. ``used``:
+    :func:`used_segments` of the schedule, or of every one vmapped beside it."""
+    _, speeds = _intervals(rate, params, delay, start, scheduled, interval_mean, substeps, used)
     return jnp.concatenate([start[None], speeds])
 
 
-@partial(jax.jit, static_argnums=(0, 6))
+@program(0, 6)
 def simulate_jit(rate, params, delay, start, scheduled, interval_mean, substeps):
-    """:func:`simulate_schedule`, compiled once per model and substep count (the reading is traced)."""
-    return simulate_schedule(rate, params, delay, start, scheduled, interval_mean, substeps)
+    """The state at the end of ``scheduled`` and the samples at each interval's end (:func:`simulate_schedule`
+    without ``start``), compiled once per model, substep count and number of intervals (the reading is traced)."""
+    return _intervals(rate, params, delay, start, scheduled, interval_mean, substeps, used_segments(scheduled[3]))
