@@ -42,10 +42,7 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
     type
         The same class, registered.
     """
-    for name, value in list(vars(cls).items()):  # a field declared by a parameter model takes its default there
-        if hasattr(value, "declared_field") and name in getattr(cls, "__annotations__", {}):
-            setattr(cls, name, value.declared_field(name))
-    cls = dataclasses.dataclass(frozen=True)(cls)
+    cls = dataclasses.dataclass(frozen=True)(declared_fields(cls))
     fields = [f for f in dataclasses.fields(cast(Any, cls)) if f.init]
     data = tuple(f.name for f in fields if not f.metadata.get("static", False))
     meta = tuple(f.name for f in fields if f.metadata.get("static", False))
@@ -67,6 +64,15 @@ def pytree_dataclass(cls: type[T]) -> type[T]:
         return obj
 
     jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
+    return cls
+
+
+def declared_fields(cls: type[T]) -> type[T]:
+    """Resolve the fields of ``cls`` declared by a parameter model (``ddtrack.parameters.declared``) into their
+    ``dataclasses.field``: apply below ``@dataclass`` on a plain dataclass; :func:`pytree_dataclass` does it itself."""
+    for name, value in list(vars(cls).items()):
+        if hasattr(value, "declared_field") and name in getattr(cls, "__annotations__", {}):
+            setattr(cls, name, value.declared_field(name))
     return cls
 
 

@@ -16,6 +16,8 @@ from typing import Annotated, Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ._pytree import declared_fields as declared_fields  # re-exported: a plain dataclass's declared fields
+
 T = TypeVar("T")
 
 Positive = Annotated[float, Field(gt=0.0)]
@@ -78,15 +80,6 @@ def declared(model: type[BaseModel], name: str | None = None) -> Any:
         rates: FloatVector = declared(NNAdaptiveParameters)
     """
     return Declared(model, name)
-
-
-def declared_fields(cls: type[T]) -> type[T]:
-    """Resolve the :func:`declared` fields of a class about to become a (non-pytree) dataclass: apply it below
-    ``@dataclass`` (:func:`~ddtrack._pytree.pytree_dataclass` does this itself)."""
-    for name, value in list(vars(cls).items()):
-        if isinstance(value, Declared) and name in cls.__annotations__:
-            setattr(cls, name, value.declared_field(name))
-    return cls
 
 
 def declaration(cls: type, field_name: str) -> tuple[type[BaseModel], str] | None:
