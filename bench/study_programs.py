@@ -34,21 +34,29 @@ def timed_bench(source: Path | None, controllers: str, cache: Path, out: Path) -
     return time.perf_counter() - start
 
 
-def count_programs(controllers: str) -> tuple[int, int]:
-    """(cells, simulation programs lowered) running every cell of the robots suite once, two seeds each."""
+def count_programs(controllers: str) -> tuple[int, int, int]:
+    """(cells, simulation programs lowered, programs the study said it needs) running every cell of the robots suite
+    once, two seeds each, as ``bench`` does (``run_sweep``: tasks batched across cells), on a worker thread in this
+    process so that the count sees its compilations."""
+    from distributed import Client, LocalCluster
+
     import ddtrack
     from ddtrack.compilations import counting_programs
     from ddtrack.robot_suite import RobotSuite, plan_robot_suite
-    from ddtrack.runner import monte_carlo
+    from ddtrack.sweep import run_sweep
 
     ddtrack.enable_float64()
     short = ("simulation.duration=2.0", "simulation.metric_window=[0.0, 2.0]")
     plan = plan_robot_suite(RobotSuite(seeds=2, overrides=short), controllers.split(","))
-    frame = plan.trajectory_frame()  # as run_sweep does
-    with counting_programs() as counts:
-        for configuration in plan.configurations:
-            monte_carlo(configuration.scenario, [0, 1], chunk_size=2, frame=frame)
-    return len(plan.configurations), counts["jit(_metric_series)"]
+    said: list[int] = []
+    with (
+        tempfile.TemporaryDirectory() as out,
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+        counting_programs() as counts,
+    ):
+        run_sweep(plan, Path(out), client, on_programs=lambda needed, held: said.append(needed))
+    return len(plan.configurations), counts["jit(_metric_series)"], said[0]
 
 
 def main() -> None:
@@ -58,8 +66,8 @@ def main() -> None:
     parser.add_argument("--count", action="store_true", help="count the simulation programs instead of timing")
     args = parser.parse_args()
     if args.count:
-        cells, programs = count_programs(args.controllers)
-        print(f"{cells} cells: {programs} simulation programs")
+        cells, programs, needed = count_programs(args.controllers)
+        print(f"{cells} cells: {programs} simulation programs compiled, {needed} said needed")
         return
     for source in [*args.source, None]:
         with tempfile.TemporaryDirectory() as scratch:

@@ -48,11 +48,12 @@ def test_a_distinct_run_holds_hundreds_of_mappings_and_releasing_returns_them():
     assert compilations.memory_mappings() - before < 0.2 * grown
 
 
-def test_a_sweep_chunk_releases_first(monkeypatch):
-    import ddtrack.sweep
+def test_a_sweep_task_releases_first(monkeypatch):
+    import ddtrack.studies.tasks as tasks
 
     calls = []
-    monkeypatch.setattr(ddtrack.sweep, "release_compilations", lambda: calls.append(1))
-    monkeypatch.setattr(ddtrack.sweep, "monte_carlo", lambda *a, **k: [{"seed": 0, "status": "ok"}])
-    records = ddtrack.sweep.run_chunk(None, {}, [("key", 0)], 1)
+    monkeypatch.setattr(tasks, "release_compilations", lambda: calls.append(1))
+    monkeypatch.setattr(tasks, "prepare_batch", lambda *a, **k: (None, None))
+    monkeypatch.setattr(tasks, "cells_rows", lambda cells, size: [[{"seed": 0, "status": "ok"}]])
+    records = tasks.run_cells([(None, {}, [("key", 0)])], 2)
     assert calls == [1] and records[0]["status"] == "ok"

@@ -39,7 +39,7 @@ LAYERS = [
     {"identification"},
     {"scenario", "metrics", "adaptation", "plausibility"},
     {"runner", "plotting"},
-    {"animation", "schema"},
+    {"animation", "schema", "studies"},
     {"rundir", "board"},
     {"mc", "tune"},
     {"reproduce", "report", "envs", "sweep", "robot_board", "ros"},

@@ -171,6 +171,7 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
     import jax
     from distributed import Client, LocalCluster
 
+    import ddtrack.studies.tasks as tasks
     import ddtrack.sweep as sweep
 
     path = write_sweep(tmp_path, masses=(10.0,), seeds=2)
@@ -185,7 +186,7 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
         LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         Client(cluster) as client,
     ):
-        monkeypatch.setattr(sweep, "monte_carlo", broken)
+        monkeypatch.setattr(tasks, "cells_rows", broken)  # the task's batched simulation
         cache_before = jax.config.jax_compilation_cache_dir
         failed = sweep.run_sweep(plan, out, client)
         # a worker in this very process keeps its caller's settings: the driver turns no process-wide switch

@@ -11,11 +11,13 @@ caches once a process holds a given share of its limit: later runs of a released
 from __future__ import annotations
 
 import gc
+import hashlib
 import logging
 import os
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from functools import cache
 from pathlib import Path
 
 MAP_LIMIT_FILE = "/proc/sys/vm/max_map_count"
@@ -24,23 +26,71 @@ LOWERING_LOGGER = "jax._src.interpreters.pxla"  #: where JAX says it lowers a pr
 RELEASE_AT = 0.5  #: the share of the mapping limit at which compiled programs are released
 
 
-def enable_compilation_cache() -> None:
-    """Turn on JAX's persistent compilation cache in ``$DDTRACK_CACHE_DIR`` or ``~/.cache/ddtrack/jax``:
-    a second process (a CLI run, a sweep worker) then skips most of the compile. Every compiled function
-    is kept: the run's small random-number jits would otherwise be compiled again each time (0.4 s)."""
-    import jax
-
+def cache_folder() -> Path:
+    """The persistent compilation cache's folder: ``$DDTRACK_CACHE_DIR/jax``, or ``~/.cache/ddtrack/jax``."""
     root = (
         os.environ.get("DDTRACK_CACHE_DIR")
         or Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ddtrack"
     )
+    return Path(root) / "jax"
+
+
+def enable_compilation_cache() -> None:
+    """Turn on JAX's persistent compilation cache in :func:`cache_folder`: a second process (a CLI run, a sweep
+    worker) then skips most of the compile. Every compiled function is kept: the run's small random-number jits
+    would otherwise be compiled again each time (0.4 s)."""
+    import jax
+
+    cache = cache_folder()
     try:
-        cache = Path(root) / "jax"
         cache.mkdir(parents=True, exist_ok=True)
     except OSError:
         return  # a read-only home only costs compile time
     jax.config.update("jax_compilation_cache_dir", str(cache))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+
+
+LEDGER = "ddtrack-programs"  #: beside JAX's cache: one line per simulation program a study compiled into it
+
+
+@cache
+def _source_fingerprint() -> str:
+    """What a compiled program depends on besides its key: this package's source, JAX's version and XLA's flags."""
+    import jax
+
+    digest = hashlib.sha256(f"{jax.__version__} {os.environ.get('XLA_FLAGS', '')}".encode())
+    for path in sorted(Path(__file__).parent.rglob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def ledger_entry(program: str) -> str:
+    """The ledger's line for ``program`` (a study's program key): it names this source, JAX and XLA flags too."""
+    return hashlib.sha256(f"{_source_fingerprint()} {program}".encode()).hexdigest()[:32]
+
+
+def compiled_programs() -> set[str]:
+    """The ledger's entries (:func:`ledger_entry`) of the programs studies compiled into the persistent cache in
+    :func:`cache_folder` (where ``ddtrack``'s commands and a study's workers keep it). Emptying the cache's folder
+    empties the ledger with it."""
+    try:
+        return set((cache_folder() / LEDGER).read_text().split())
+    except OSError:
+        return set()
+
+
+def record_compiled(programs: Iterable[str]) -> None:
+    """Add ``programs`` (ledger entries) to the ledger, where this process's persistent cache is on; one short append
+    per call, which concurrent workers' appends do not interleave."""
+    import jax
+
+    folder = jax.config.jax_compilation_cache_dir
+    if folder:
+        try:
+            with open(Path(folder) / LEDGER, "a") as ledger:
+                ledger.write("".join(f"{entry}\n" for entry in programs))
+        except OSError:
+            pass  # a read-only cache only loses the count
 
 
 def padded_length(n: int) -> int:

@@ -28,6 +28,7 @@ from .robot_board import board_markdown, board_table, figure, summarize
 from .robots import PRESETS
 from .scenario import controller_kind, controller_kinds, tracking_kinds
 from .scenario.files import apply_override, validate_scenario
+from .studies.cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep
 
 
@@ -282,7 +283,7 @@ def plan_robot_suite(suite: RobotSuite, entries: Sequence[str]) -> Plan:
             cell_text = canonical({"labels": configuration.labels, "controller": configuration.controller})
             key = hashlib.sha256((run_key(configuration.scenario, seed) + cell_text).encode()).hexdigest()
             runs[key] = (index, seed)
-    return Plan(configurations, runs, chunk=suite.seeds)
+    return Plan(configurations, runs, chunk=max(SUITE_TASK, suite.seeds))
 
 
 def run_robot_suite(
@@ -292,11 +293,12 @@ def run_robot_suite(
     client: Any,
     *,
     on_record: Callable[[int, int], None] = lambda done, total: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> dict:
     """Run every cell through the sweep runner (resumable), then write ``leaderboard.md``, ``.csv``, ``.parquet``,
     ``.json``, the per-run ``results.*`` and ``robots.png``."""
     plan = plan_robot_suite(suite, entries)
-    outcome = run_sweep(plan, out, client, on_record=on_record)
+    outcome = run_sweep(plan, out, client, on_record=on_record, on_programs=on_programs)
     records = {k: r for k, r in read_records(out).items() if k in plan.runs}
     summary = summarize(records, suite.robots, suite.conditions, entries, cells(suite, entries)[1])
     result = {

@@ -8,10 +8,8 @@ disturbances unchanged (common random numbers).
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -37,30 +35,6 @@ from .trajectories import Trajectory
 from .trajectories.switched import TrajectoryFrame
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
-
-
-def cache_on_every_worker(client: Any) -> None:
-    """float64 (:func:`ddtrack.enable_float64`) and JAX's persistent compilation cache
-    (:func:`ddtrack.compilations.enable_compilation_cache`) on every worker process of ``client``'s cluster, now and as
-    workers join or restart: set once by the driver, as a worker plugin, so that a task never changes its worker's
-    settings. A threaded worker in the driver's own process is left alone: that process is its caller's."""
-    from distributed import WorkerPlugin
-
-    class CompilationCache(WorkerPlugin):
-        name = "ddtrack-compilation-cache"
-
-        def __init__(self, driver_pid: int) -> None:
-            self.driver_pid = driver_pid
-
-        def setup(self, worker: Any) -> None:
-            if os.getpid() != self.driver_pid:
-                from ddtrack.compilations import enable_compilation_cache
-                from ddtrack.precision import enable_float64
-
-                enable_float64()
-                enable_compilation_cache()
-
-    client.register_plugin(CompilationCache(os.getpid()))
 
 
 def streams(seed: int) -> dict[str, jax.Array]:
@@ -216,18 +190,20 @@ def prepare_batch(
     *,
     identification: Identification | None = None,
     frame: TrajectoryFrame | None = None,
+    identify: bool = True,
 ) -> tuple[Setup, Draws]:
     """:func:`prepare` for many seeds, stacked along a leading batch axis; NN emulators are identified
     for all the runs at once (``vmap``), or taken from ``identification``: a batch's emulators already identified
     for the same plants and seeds (ablations that only change the gain law). A study's ``frame`` puts the
-    trajectory among the study's other kinds (:class:`~ddtrack.trajectories.switched.Switched`)."""
+    trajectory among the study's other kinds (:class:`~ddtrack.trajectories.switched.Switched`); ``identify=False``
+    leaves an NN emulator untrained (a batch's structure is the same)."""
     pairs = [prepare(scenario, seed=seed, identify=False) for seed in seeds]
     fields = ("plant_params", "controller", "trajectory", "x0", "disturbance", "noise", "sensing_key")
     setup = dataclasses.replace(pairs[0][0], **{f: stack([getattr(p[0], f) for p in pairs]) for f in fields})
     if frame is not None:
         setup = dataclasses.replace(setup, trajectory=frame.place(setup.trajectory, len(seeds)))
     draws = stack([p[1] for p in pairs])
-    if needs_identification(scenario):
+    if identify and needs_identification(scenario):
         keys = stack([controller_keys(seed)[1] for seed in seeds])
         if identification is None:
             identification = in_shares(
@@ -286,7 +262,7 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
-    runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+    runs = batch_runs(setup, draws)
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
         return simulate_batch(*runs, **run_options(scenario))
     return simulate_alone(*runs, **run_options(scenario))  # as a batch's row, bit for bit
@@ -295,13 +271,16 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
 def run_options(scenario: Scenario) -> dict:
     """The static timing and the limits every simulation of ``scenario`` takes (single run, batch, Monte Carlo
     chunk): keyword arguments of ``ddtrack.sim.simulate`` and its batched forms."""
-    sim = scenario.simulation
     return {
-        "n_steps": sim.n_steps,
-        "control_period": sim.control_period,
-        "substeps": sim.substeps,
+        "n_steps": scenario.simulation.n_steps,
+        **_timing(scenario),
         "divergence_error": scenario.divergence_distance(),
     }
+
+
+def _timing(scenario: Scenario) -> dict:
+    sim = scenario.simulation
+    return {"control_period": sim.control_period, "substeps": sim.substeps}
 
 
 #: the series metrics and warnings read
@@ -393,11 +372,15 @@ def _metric_series(
     draws: Draws,
     disturbance: WheelDisturbance,
     noise: MeasurementNoise,
+    divergence_error: Array,
     **steps: int,
 ) -> tuple[dict, Array, Array]:
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
-    recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md)."""
-    result = simulate_batch(plant, controller, trajectory, x0, draws, disturbance, noise, **steps)
+    recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md).
+    ``divergence_error`` holds each run's bound [m], so runs of different scenarios can share the batch."""
+    result = simulate_batch(
+        plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error=divergence_error, **steps
+    )
     series = {
         "e_xy": POSTURE_ERROR.span(result.error, "e_x", "e_y"),  # e_tr in NumPy on the host, as timeseries does
         "v": BODY.read(result.state, "v"),
@@ -408,12 +391,32 @@ def _metric_series(
     return series, result.status, result.failure_index
 
 
+def batch_runs(setup: Setup, draws: Draws) -> tuple:
+    """The arguments of a prepared batch's simulation, in :func:`_metric_series`'s order (without the bound)."""
+    return (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+
+
+def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs`, or several scenarios' runs of one
+    structure joined along the run axis) with the timing of ``scenario``, split over the devices
+    (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays."""
+    series = partial(_metric_series, n_steps=scenario.simulation.n_steps, **_timing(scenario))
+    return jax.tree_util.tree_map(np.asarray, in_shares(series, *runs, divergence_error))
+
+
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
+    runs = batch_runs(setup, draws)
+    bounds = np.full(len(np.asarray(setup.x0)), scenario.divergence_distance())
+    return series_metrics(scenario, setup, *metric_series(scenario, runs, bounds))
+
+
+def series_metrics(
+    scenario: Scenario, setup: Setup, series: dict, status: np.ndarray, failure_index: np.ndarray
+) -> list[dict]:
+    """The metrics of each run of a batch from its :func:`metric_series` (the rows of ``setup``'s runs)."""
     sim = scenario.simulation
-    runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
-    metric_series = partial(_metric_series, **run_options(scenario))
-    series, status, failure_index = jax.tree_util.tree_map(np.asarray, in_shares(metric_series, *runs))
+    series = dict(series)
     e_xy = series.pop("e_xy")
     series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
     t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
@@ -442,6 +445,12 @@ def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
             )
         )
     return metrics
+
+
+def drawn_plant(scenario: Scenario, setup: Setup, i: int) -> dict[str, float]:
+    """``plant_<field>`` of run ``i`` of a prepared batch, for each ``[randomize]`` draw (in its unit)."""
+    drawn = [field for field, draw in scenario.randomize if draw is not None]
+    return {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
 
 
 def monte_carlo(
@@ -477,14 +486,12 @@ def monte_carlo(
         Per seed: ``seed``, ``plant_<field>`` for each drawn plant parameter (in its unit), and the
         :func:`ddtrack.summarize` metrics.
     """
-    drawn = [field for field, draw in scenario.randomize if draw is not None]
     rows: list[dict] = []
     for start in range(0, len(seeds), chunk_size):
         chunk = list(seeds[start : start + chunk_size])
         padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
         setup, draws = prepare_batch(scenario, padded, frame=frame)
         for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):
-            plant = {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
-            rows.append({"seed": seed, **plant, **metrics})
+            rows.append({"seed": seed, **drawn_plant(scenario, setup, i), **metrics})
         on_chunk(len(rows))
     return rows

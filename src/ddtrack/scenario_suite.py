@@ -37,6 +37,7 @@ from .errors import ConfigError
 from .metrics import pooled_improvement
 from .robot_suite import default_entries, entry_controller, entry_labels, suite_entry
 from .scenario import Scenario, controller_output, load_scenario, plant_kind, to_toml_dict, validate_scenario
+from .studies.cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 
 STUDY = "scenario"  #: the ``label.study`` of every run of a scenario bench
@@ -203,7 +204,7 @@ def plan_entries(entries: Sequence[BenchEntry], seeds: int) -> Plan:
         for seed in range(seeds):
             key = hashlib.sha256((run_key(configuration.scenario, seed) + cell).encode()).hexdigest()
             runs[key] = (index, seed)
-    return Plan(configurations, runs, chunk=min(seeds, 64))
+    return Plan(configurations, runs, chunk=max(SUITE_TASK, min(seeds, 64)))
 
 
 # --- the leaderboard -----------------------------------------------------------------------------------------
@@ -363,11 +364,12 @@ def run_scenario_bench(
     client: Any,
     *,
     on_record: Callable[[int, int], None] = lambda done, total: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> dict:
     """Run every entry's seeds through the sweep runner (resumable), then write ``leaderboard.md``, ``.csv``,
     ``.parquet``, ``.json``, the per-run ``results.*`` and ``entries.png``; return ``leaderboard.json``'s content."""
     plan = plan_entries(entries, seeds)
-    outcome = run_sweep(plan, out, client, on_record=on_record)
+    outcome = run_sweep(plan, out, client, on_record=on_record, on_programs=on_programs)
     records = {k: r for k, r in read_records(out).items() if k in plan.runs}
     board = leaderboard(records, entries)
     reference = entries[0].label

@@ -28,6 +28,7 @@ from .metrics import pooled_improvement
 from .outdir import atomic_write
 from .scenario import controller_kinds, kanayama_gains, load_scenario, tracking_kinds
 from .shipped import scenario_path
+from .studies.cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 from .tune import problems, tune
 
@@ -193,7 +194,7 @@ def plan_suite(suite: Suite, controllers: Sequence[str], tuned_gains: Sequence[f
             cell = canonical({"labels": configuration.labels, "controller": configuration.controller})
             key = hashlib.sha256((run_key(configuration.scenario, seed) + cell).encode()).hexdigest()
             runs[key] = (index, seed)
-    return Plan(configurations, runs, chunk=suite.seeds)
+    return Plan(configurations, runs, chunk=max(SUITE_TASK, suite.seeds))
 
 
 # --- the leaderboard -----------------------------------------------------------------------------------------
@@ -378,6 +379,7 @@ def run_suite(
     client: Any,
     *,
     on_record: Callable[[int, int], None] = lambda done, total: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> dict:
     """Tune (or reuse ``out/tuned.toml``), run every cell through the sweep runner, write the leaderboard
     (``leaderboard.md``, ``.csv``, ``.parquet``), the per-run ``results.parquet``/``.csv`` and the figures."""
@@ -396,7 +398,7 @@ def run_suite(
             )
             atomic_write(stored, lambda f: f.write(text.encode()))
     plan = plan_suite(suite, controllers, tuned)
-    outcome = run_sweep(plan, out, client, on_record=on_record)
+    outcome = run_sweep(plan, out, client, on_record=on_record, on_programs=on_programs)
     records = {k: r for k, r in read_records(out).items() if k in plan.runs}
     board = leaderboard(records, controllers)
     summary = {

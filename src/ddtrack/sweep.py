@@ -19,7 +19,6 @@ import io
 import itertools
 import json
 import math
-import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,16 +30,15 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .compilations import release_compilations
 from .errors import ConfigError, did_you_mean
 from .metrics import warning_counts
 from .outdir import atomic_write
-from .runner import cache_on_every_worker, monte_carlo
 from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
+from .studies.cells import cache_on_every_worker, programs_held
+from .studies.tasks import ERROR, error_record, error_records, plan_tasks, planned_keys, run_cells
 from .trajectories.switched import TrajectoryFrame, trajectory_frame
 
 RECORDS = "records"
-ERROR = "error"  #: status of a run whose task raised; such runs are retried when the sweep restarts
 
 
 # --- the sweep file ---------------------------------------------------------------------------------
@@ -193,7 +191,7 @@ class Plan:
 
     configurations: list[Configuration]
     runs: dict[str, tuple[int, int]]  #: key -> (configuration index, seed), in plan order
-    chunk: int  #: runs per task (every task of the sweep is padded to this many, so each compiles once)
+    chunk: int  #: the most runs a task batches, across the cells that share a program (tasks.plan_tasks)
 
     def identity(self) -> str:
         """A short fingerprint of the plan's runs: an output folder resumes only the sweep that wrote it."""
@@ -265,60 +263,10 @@ def plan_sweep(sweep: SweepFile, base_dir: Path) -> Plan:
             configurations.append(Configuration(controller, overrides, scenario))
             for seed in seeds:
                 runs.setdefault(run_key(scenario, seed), (len(configurations) - 1, seed))  # equal scenarios run once
-    return Plan(configurations, runs, chunk=min(sweep.chunk, len(seeds)))
+    return Plan(configurations, runs, chunk=sweep.chunk)
 
 
 # --- the tasks -----------------------------------------------------------------------------------
-
-
-def run_chunk(
-    scenario: Scenario,
-    configuration: dict[str, Any],
-    runs: Sequence[tuple[str, int]],
-    chunk: int,
-    frame: TrajectoryFrame | None = None,
-) -> list[dict]:
-    """The task: simulate ``runs`` ((key, seed) pairs, at most ``chunk``) as one vmapped batch, padded to
-    ``chunk`` runs, the trajectory in the study's ``frame``; return one record per run. An exception becomes error
-    records, not a lost task."""
-    seeds = [seed for _, seed in runs]
-    release_compilations()  # a worker compiles every configuration it runs: stay clear of the mapping limit
-    try:
-        padded = seeds + [seeds[0]] * (chunk - len(seeds))
-        rows = monte_carlo(scenario, padded, chunk_size=chunk, frame=frame)[: len(seeds)]
-    except Exception as exc:
-        text = "".join(traceback.format_exception_only(exc)).strip()
-        return [error_record(key, configuration, seed, text) for key, seed in runs]
-    records = []
-    for (key, seed), row in zip(runs, rows, strict=True):
-        metrics = {k: v for k, v in row.items() if k != "seed"}
-        records.append(
-            {
-                "key": key,
-                "configuration": configuration,
-                "seed": seed,
-                "status": metrics["status"],
-                "metrics": _finite(metrics),
-                "error": None,
-            }
-        )
-    return records
-
-
-def error_record(key: str, configuration: dict[str, Any], seed: int, text: str) -> dict:
-    """The record of a run that raised: status ``error``, no metrics, the error's ``text``."""
-    return {"key": key, "configuration": configuration, "seed": seed, "status": ERROR, "metrics": None, "error": text}
-
-
-def _finite(value: Any) -> Any:
-    """NaN and inf become None, so records are strict JSON."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # --- the store -----------------------------------------------------------------------------------
@@ -425,10 +373,17 @@ class Outcome:
 
 
 def run_sweep(
-    plan: Plan, out: Path, client: Any, *, on_record: Callable[[int, int], None] = lambda done, total: None
+    plan: Plan,
+    out: Path,
+    client: Any,
+    *,
+    on_record: Callable[[int, int], None] = lambda done, total: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> Outcome:
-    """Submit the runs that have no record to ``client``'s cluster, write records as tasks finish, then
-    the results tables. ``on_record(done, total)`` follows progress."""
+    """Submit the runs that have no record to ``client``'s cluster, the runs of cells that share a simulation
+    program batched together (:func:`plan_tasks`), write records as tasks finish, then the results tables.
+    ``on_programs(needed, held)`` hears, before anything runs, how many simulation programs the runs need and how many
+    the persistent compilation cache holds; ``on_record(done, total)`` follows progress."""
     from distributed import as_completed
 
     cache_on_every_worker(client)
@@ -437,21 +392,20 @@ def run_sweep(
     for key, (index, seed) in plan.runs.items():
         if key not in existing:
             missing.setdefault(index, []).append((key, seed))
-    futures = {}
     frame = plan.trajectory_frame()  # one program per structure, whatever trajectories the cells follow
-    for index, runs in missing.items():
-        configuration = plan.configurations[index]
-        runs.sort(key=lambda pair: pair[1])
-        for start in range(0, len(runs), plan.chunk):
-            part = runs[start : start + plan.chunk]
-            future = client.submit(
-                run_chunk, configuration.scenario, configuration.describe(), part, plan.chunk, frame, pure=False
-            )
-            futures[future] = (configuration.describe(), part)
+    indices = sorted(missing)
+    keys = planned_keys(client, plan.configurations, indices, frame)
+    tasks = plan_tasks(plan.configurations, plan.chunk, missing, keys)
+    structures = {key: size for _, size, key in tasks}  # one program each: every task of a structure is one size
+    on_programs(len(structures), programs_held(list(structures), list(structures.values())))
+    futures = {}
+    for task, size, _ in tasks:
+        future = client.submit(run_cells, task, size, frame, pure=False)
+        futures[future] = task
     done = len(existing)
     on_record(done, len(plan.runs))
     for future in as_completed(list(futures)):
-        described, part = futures.pop(future)
+        task = futures.pop(future)
         if future.status == "finished":
             records = future.result()
         else:  # the task could not run at all (e.g. it killed its workers too often): record why
@@ -459,8 +413,7 @@ def run_sweep(
                 exc = future.exception()
             except Exception as cancelled:
                 exc = cancelled
-            text = "".join(traceback.format_exception_only(exc)).strip()
-            records = [error_record(key, described, seed, text) for key, seed in part]
+            records = [record for _, described, part in task for record in error_records(exc, described, part)]
         for record in records:
             write_record(out, record)
         done += len(records)
@@ -478,5 +431,5 @@ def run_sweep(
     )
 
 
-__all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep", "run_chunk"]
-__all__ += ["run_key", "run_sweep", "table", "write_results"]
+__all__ = ["Configuration", "Outcome", "Plan", "SweepFile", "plan_sweep", "read_records", "read_sweep", "run_cells"]
+__all__ += ["error_record", "run_key", "run_sweep", "table", "write_results"]

@@ -305,6 +305,14 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
         yield advance
 
 
+def say_programs(needed: int, held: int) -> None:
+    """A study's first line (stderr): the simulation programs its runs need, and how many the cache already holds."""
+    plural = "program" if needed == 1 else "programs"
+    click.echo(
+        f"{needed} simulation {plural} to run (one per structure); {held} already compiled in the cache", err=True
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``) and return the exit code."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # commands write figures to files and never show them

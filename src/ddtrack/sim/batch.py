@@ -10,6 +10,7 @@ from typing import Any, TypeVar
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
 
 from ..precision import float64_in_this_thread
 from .result import SimResult
@@ -50,15 +51,18 @@ def simulate_batch(
     n_steps: int,
     control_period: float,
     substeps: int,
-    divergence_error: float,
+    divergence_error: Array | float,
     divergence_speed: float = DIVERGENCE_SPEED,
 ) -> SimResult:
-    """Run B simulations at once; every argument but the static ones has a leading batch axis B.
+    """Run B simulations at once; every argument but the static ones has a leading batch axis B, and
+    ``divergence_error`` [m] is one bound for all or one per run (a study's cells batched together differ in it).
 
     Row i is the run :func:`simulate` would give for the arguments' row i (the same code, vmapped).
     """
+    runs = len(jnp.asarray(x0))
+    bounds = jnp.broadcast_to(jnp.asarray(divergence_error, dtype=float), (runs,))
 
-    def one(plant, controller, trajectory, x0, draws, disturbance, noise):
+    def one(plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error):
         return simulate(
             plant,
             controller,
@@ -74,7 +78,7 @@ def simulate_batch(
             divergence_speed=divergence_speed,
         )
 
-    return vmap_runs(one)(plant, controller, trajectory, x0, draws, disturbance, noise)
+    return vmap_runs(one)(plant, controller, trajectory, x0, draws, disturbance, noise, bounds)
 
 
 @partial(jax.jit, static_argnames=("n_steps", "substeps"))
@@ -90,7 +94,7 @@ def simulate_alone(
     n_steps: int,
     control_period: float,
     substeps: int,
-    divergence_error: float,
+    divergence_error: Array | float,
     divergence_speed: float = DIVERGENCE_SPEED,
 ) -> SimResult:
     """One run (arguments without a batch axis) as row 0 of :func:`simulate_batch`, so that its bits equal its row
