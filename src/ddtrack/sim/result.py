@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 from jax import Array
 
+from ..layout import BODY, POSTURE_ERROR
 from ..trajectories import Reference
 
 STATUS_NAMES = ("ok", "diverged", "non_finite")
@@ -125,22 +126,17 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     logs = {name: np.asarray(value, dtype=float)[rows] for name, value in result.logs.items()}
     ref = {name: np.asarray(value, dtype=float)[rows] for name, value in result.reference._asdict().items()}
     nan = np.full(n, np.nan)
+    body, posture = BODY.columns(state), POSTURE_ERROR.columns(error)
     columns = {
         "t": np.asarray(result.t, dtype=float)[rows],
-        "x": state[:, 0],
-        "y": state[:, 1],
-        "theta": state[:, 2],
-        "v": state[:, 3],
-        "omega": state[:, 4],
+        **body,
         "x_ref": ref["x"],
         "y_ref": ref["y"],
-        "theta_ref": state[:, 2] + error[:, 2],  # continuous like theta; the reference's own is wrapped
+        "theta_ref": body["theta"] + posture["e_theta"],  # continuous like theta; the reference's own is wrapped
         "v_ref": ref["v"],
         "omega_ref": ref["omega"],
-        "e_x": error[:, 0],
-        "e_y": error[:, 1],
-        "e_theta": error[:, 2],
-        "e_tr": np.hypot(error[:, 0], error[:, 1]),
+        **posture,
+        "e_tr": np.hypot(posture["e_x"], posture["e_y"]),
         # the velocity command, where one was logged or a velocity-driven plant took it; never the torques instead
         **{name: logs.pop(name) for name in ("v_cmd", "omega_cmd") if name in logs},
         "tau_r": logs.pop("tau_r", nan),
