@@ -84,7 +84,7 @@ def record_compiled(programs: Iterable[str]) -> None:
     per call, which concurrent workers' appends do not interleave."""
     import jax
 
-    folder = jax.config.jax_compilation_cache_dir
+    folder = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # read(), refused for this flag
     if folder:
         try:
             with open(Path(folder) / LEDGER, "a") as ledger:

@@ -51,8 +51,8 @@ class Layout:
         """The entries from ``first`` to ``last``, both included, of ``vector`` (the last axis), as one slice."""
         return vector[..., self.index(first) : self.index(last) + 1]
 
-    def columns(self, vectors: Array) -> dict[str, Array]:
-        """Each channel of ``vectors`` (..., len(self)) by name."""
+    def columns(self, vectors: Any) -> dict[str, Any]:
+        """Each channel of ``vectors`` (..., len(self); a JAX or NumPy array) by name."""
         return {name: vectors[..., i] for i, name in enumerate(self.names)}
 
 
