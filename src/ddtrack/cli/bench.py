@@ -11,7 +11,7 @@ import click
 
 from ..cluster import check_cluster_options, cluster_options, dask_client
 from ..errors import ConfigError
-from . import cli, enable_compilation_cache, overwrite_option, progress_bar, say_programs
+from . import cli, enable_compilation_cache, overwrite_option, progress_bar, study_progress
 
 SCENARIO_SEEDS = 10  #: seeds per entry of a --scenario bench, unless --seeds says otherwise
 
@@ -134,14 +134,7 @@ def bench(
     enable_compilation_cache()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
-        summary = run_suite(
-            suite,
-            names,
-            out,
-            client,
-            on_record=lambda done, total: advance(done, total=total),
-            on_programs=say_programs,
-        )
+        summary = run_suite(suite, names, out, client, **study_progress(advance))
     from ..sweep import read_records
 
     click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
@@ -180,14 +173,7 @@ def _bench_robots(
     start = time.perf_counter()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
-        summary = run_robot_suite(
-            suite,
-            names,
-            out,
-            client,
-            on_record=lambda done, total: advance(done, total=total),
-            on_programs=say_programs,
-        )
+        summary = run_robot_suite(suite, names, out, client, **study_progress(advance))
     click.echo(board_markdown(summary, suite.conditions), nl=False)
     click.echo(
         f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "
@@ -221,14 +207,7 @@ def _bench_scenarios(
     start = time.perf_counter()
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
-        summary = run_scenario_bench(
-            entries,
-            seeds,
-            out,
-            client,
-            on_record=lambda done, total: advance(done, total=total),
-            on_programs=say_programs,
-        )
+        summary = run_scenario_bench(entries, seeds, out, client, **study_progress(advance))
     click.echo(board_markdown(summary["leaderboard"], summary["reference"]), nl=False)
     click.echo(
         f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "

@@ -9,7 +9,7 @@ import click
 
 from ..cluster import check_cluster_options, cluster_options, dask_client
 from ..errors import ConfigError
-from . import cli, enable_compilation_cache, overwrite_option, progress_bar, say_programs
+from . import cli, enable_compilation_cache, overwrite_option, progress_bar, study_progress
 
 
 @cli.command(short_help="The paper's Table 1 and Figs. 10-17, over seeds, with intervals.")
@@ -290,7 +290,7 @@ def sweep(
     resume = check_output(out, command="sweep", overwrite=overwrite, study=study)  # the same sweep resumes
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(len(plan.runs), "runs") as advance:
         start_resumable(out, command="sweep", study=study, resume=resume)
-        outcome = run_sweep(plan, out, client, on_record=lambda done, total: advance(done), on_programs=say_programs)
+        outcome = run_sweep(plan, out, client, **study_progress(advance))
     click.echo(
         f"{outcome.total} runs ({len(plan.configurations)} configurations x {len(spec.seed_list)} seeds): "
         f"{outcome.reused} found in {out}/records, {outcome.ran} run; "

@@ -53,7 +53,8 @@ def task_size(runs: int, most: int) -> int:
     over two devices)."""
     tasks = -(-runs // most)
     size = -(-runs // tasks)
-    return size + size % 2 if size + size % 2 <= max(most, 2) else size
+    even = size + size % 2
+    return even if even <= max(most, 2) else size
 
 
 def programs_held(keys: Sequence[str], sizes: Sequence[int]) -> int:
