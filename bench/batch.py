@@ -3,7 +3,7 @@
     python bench/batch.py [--json] [--sizes 64,256,1024] [--repeats 2] [--devices N] [--series]
 
 The paper's line case (4000 control periods of 10 RK4 substeps), backstepping and NN-adaptive backstepping.
-What is timed is ``runner.batch_metrics``, the path of ``ddtrack mc`` and ``ddtrack sweep``: the vmapped
+What is timed is ``studies.batches.batch_metrics``, the path of ``ddtrack mc`` and ``ddtrack sweep``: the vmapped
 simulation keeping only the series the metrics read, then the metrics. ``--series`` times ``simulate_batch``
 instead, which records every time series. The NN runs skip identification (``controller.identification=false``):
 this measures the control loop itself, emulator training and gain law included. ``--devices N`` gives JAX N CPU
@@ -32,7 +32,8 @@ def throughput(kind: str, size: int, repeats: int, series: bool = False) -> dict
     import ddtrack
 
     ddtrack.enable_float64()
-    from ddtrack.runner import batch_metrics, prepare_batch, run_setup
+    from ddtrack.runner import prepare_batch, run_setup
+    from ddtrack.studies.batches import batch_metrics
 
     scenario = ddtrack.load_scenario(ROOT / "scenarios" / "paper_line.toml", overrides=KINDS[kind], controller=kind)
     setup, draws = prepare_batch(scenario, list(range(size)))

@@ -18,7 +18,8 @@ import numpy as np
 
 import ddtrack
 from ddtrack import load_scenario
-from ddtrack.runner import batch_metrics, prepare_batch, run_setup
+from ddtrack.runner import prepare_batch, run_setup
+from ddtrack.studies.batches import batch_metrics
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "burger_cmd_vel_figure8.toml"
 CASES = {

@@ -32,7 +32,7 @@ def timed_sweep(workers: int, seeds: int, chunk: int) -> float:
     from distributed import Client
 
     from ddtrack.cluster import local_cluster
-    from ddtrack.sweep import plan_sweep, read_sweep, run_sweep
+    from ddtrack.studies.sweep import plan_sweep, read_sweep, run_sweep
 
     with tempfile.TemporaryDirectory() as tmp, local_cluster(workers) as cluster, Client(cluster) as client:
         folder = Path(tmp)

@@ -20,8 +20,9 @@ import numpy as np
 
 from ddtrack import enable_float64
 from ddtrack.metrics import improvement
-from ddtrack.runner import batch_metrics, enable_compilation_cache, prepare_batch
+from ddtrack.runner import enable_compilation_cache, prepare_batch
 from ddtrack.scenario import load_scenario
+from ddtrack.studies.batches import batch_metrics
 
 BASE = Path(__file__).resolve().parent.parent / "scenarios" / "burger_sized_20hz.toml"
 

@@ -31,7 +31,7 @@ Checks, before any timing: the final states (x_{N-1}, the last recorded row of `
 ``e_tr_mean`` must agree with ddtrack's to ``BS_TOLERANCE`` (backstepping) and ``NN_TOLERANCE`` (NN-adaptive)
 relative; the script exits with status 1 otherwise.
 
-Timing, all in this one process: ddtrack's ``runner.batch_metrics`` (the path of ``ddtrack mc`` and
+Timing, all in this one process: ddtrack's ``studies.batches.batch_metrics`` (the path of ``ddtrack mc`` and
 ``bench/batch.py``: the vmapped simulation sharded over ``--threads`` JAX CPU devices, then the metrics on the host)
 and, separately, its jitted simulation alone (the same sharded call without the host metrics); the Numba loop with
 ``prange`` over robots on ``--threads`` threads. Compile excluded for both (one warm-up call; Numba's JIT compile
@@ -566,7 +566,8 @@ def relative_difference(a: np.ndarray, b: np.ndarray) -> float:
 
 def check(kind: str, kernel, scenario, setup, draws, arrays: dict) -> dict:
     """Run both engines on the same robots; compare final states, e_tr_mean, status (and the NN's final gains)."""
-    from ddtrack.runner import batch_metrics, run_setup
+    from ddtrack.runner import run_setup
+    from ddtrack.studies.batches import batch_metrics
 
     result = run_setup(scenario, setup, draws, batched=True)
     metrics = batch_metrics(scenario, setup, draws)
@@ -611,11 +612,13 @@ def median_time(call, repeats: int) -> tuple[float, list[float]]:
 
 
 def time_ddtrack(scenario, setup, draws, repeats: int) -> dict:
-    """``runner.batch_metrics`` (simulation split over the devices + host metrics) and the split simulation alone."""
+    """``studies.batches.batch_metrics`` (simulation split over the devices + host metrics) and the split simulation
+    alone."""
     import jax
 
-    from ddtrack.runner import _metric_series, batch_metrics, run_options
+    from ddtrack.runner import run_options
     from ddtrack.sim.batch import in_shares
+    from ddtrack.studies.batches import _metric_series, batch_metrics
 
     runs = (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
     series = partial(_metric_series, **run_options(scenario))

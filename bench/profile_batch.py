@@ -6,7 +6,7 @@ On one CPU device, per robot control step of the paper's line case (10 RK4 subst
 
 * ``plant_only_ns``: the plant alone, integrated under a constant torque (no controller, nothing recorded);
 * ``full_step_ns`` / ``metrics_step_ns``: the whole closed loop of ``simulate_batch`` (every series recorded) and of
-  ``runner.batch_metrics`` (only what the metrics read), backstepping;
+  ``studies.batches.batch_metrics`` (only what the metrics read), backstepping;
 * ``<op>_ns``: one float64 (and float32) elementwise transcendental on a batch, per element, in a ``fori_loop``,
   against a multiply-add: the plant needs a sine, a cosine and two tanh per evaluation.
 """
@@ -22,8 +22,9 @@ import jax
 import jax.numpy as jnp
 
 import ddtrack
-from ddtrack.runner import batch_metrics, prepare_batch, run_setup
+from ddtrack.runner import prepare_batch, run_setup
 from ddtrack.sim import rk4
+from ddtrack.studies.batches import batch_metrics
 
 ddtrack.enable_float64()  # ddtrack computes in float64: once, before any JAX array
 

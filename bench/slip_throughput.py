@@ -15,8 +15,8 @@ with the same wheel inertia):
 * ``turtlebot3_burger_cmd_vel``: the Burger's circle under kinematic backstepping over its PI wheel-speed loop,
   ``motor_velocity`` (no slip) against ``slip_velocity``.
 
-What is timed is ``runner.batch_metrics`` (the path of ``ddtrack mc``), compile excluded (one warm-up call), best of
-``repeats``. Prints robot control steps per second and the ratio slip / no-slip.
+What is timed is ``studies.batches.batch_metrics`` (the path of ``ddtrack mc``), compile excluded (one warm-up
+call), best of ``repeats``. Prints robot control steps per second and the ratio slip / no-slip.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ def throughput(
     import ddtrack
 
     ddtrack.enable_float64()
-    from ddtrack.runner import batch_metrics, prepare_batch
+    from ddtrack.runner import prepare_batch
+    from ddtrack.studies.batches import batch_metrics
 
     sets = [*COMMON, *overrides, f"plant.model={model}", f"simulation.duration={duration}"]
     sets.append(f"simulation.metric_window=[0, {duration}]")

@@ -24,7 +24,7 @@ In one process, in this order:
 6. ``control_bs_s``: python-control's ``input_output_response`` on the same closed loop at matching
    accuracy (bench/control_loop.py; needs ``pip install -e '.[bench]'``); ``ratio_control_over_ddtrack``.
 7. ``batch_bs_robot_steps_per_s`` / ``batch_nn_robot_steps_per_s``: robot control steps per second of
-   ``runner.batch_metrics`` (the path of ``ddtrack mc``) at the best of the tried batch sizes (bench/batch.py),
+   ``studies.batches.batch_metrics`` (the path of ``ddtrack mc``) at the best of the tried batch sizes (bench/batch.py),
    on one JAX CPU device per core, as the ``ddtrack`` command sets up.
 8. ``cold_cli_s`` / ``warm_cli_s``: wall time of a whole ``ddtrack run scenarios/paper_line.toml
    --out <tmp>`` subprocess (interpreter start, imports, compile, run, metrics, writing the run

@@ -42,8 +42,8 @@ def count_programs(controllers: str) -> tuple[int, int, int]:
 
     import ddtrack
     from ddtrack.compilations import counting_programs
-    from ddtrack.robot_suite import RobotSuite, plan_robot_suite
-    from ddtrack.sweep import run_sweep
+    from ddtrack.studies.robot_suite import RobotSuite, plan_robot_suite
+    from ddtrack.studies.sweep import run_sweep
 
     ddtrack.enable_float64()
     short = ("simulation.duration=2.0", "simulation.metric_window=[0.0, 2.0]")

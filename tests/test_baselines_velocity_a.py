@@ -18,7 +18,8 @@ from ddtrack.controllers import lyapunov
 from ddtrack.controllers.baselines import RegulatedPurePursuit
 from ddtrack.metrics import summarize
 from ddtrack.model import KinematicPlant
-from ddtrack.runner import monte_carlo, row, run_batch
+from ddtrack.runner import row, run_batch
+from ddtrack.studies.batches import monte_carlo
 from ddtrack.trajectories import Circle, Line, polyline_path
 
 LINE = SCENARIOS / "paper_line.toml"

@@ -14,8 +14,9 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
-from ddtrack.mc import load_specs, run_specs, summarise
-from ddtrack.runner import monte_carlo, prepare
+from ddtrack.runner import prepare
+from ddtrack.studies.batches import monte_carlo
+from ddtrack.studies.mc import load_specs, run_specs, summarise
 
 SHORT = ["simulation.duration=4", "simulation.metric_window=[0, 4]"]
 # Gaussian wheel disturbance, pose noise and a random plant mass: every random stream is exercised
@@ -172,7 +173,7 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
     ]
     script = (
         "import jax, json, sys; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "import ddtrack\nfrom ddtrack.runner import monte_carlo, in_shares\n"
+        "import ddtrack\nfrom ddtrack.sim.batch import in_shares\nfrom ddtrack.studies.batches import monte_carlo\n"
         "seen = []\nin_shares(lambda x: seen.append((x.shape, *x.devices())) or x, jax.numpy.zeros(4))\n"
         "assert len(jax.devices()) == 2 and seen == [((2,), jax.devices()[0])] * 2, seen\n"  # two shares, one device
         "with jax.enable_x64(True):\n"  # float64 in this thread only
@@ -181,8 +182,9 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
         "ddtrack.enable_float64()\n"
         "print(json.dumps(monte_carlo(scenario, [0, 1], chunk_size=2)))\n"  # one run per share: left unsplit
         f"nn = ddtrack.load_scenario({str(SCENARIOS / 'paper_line.toml')!r}, overrides={nn!r})\n"
-        "import ddtrack.runner as runner\nsplit, split_runs = [], runner.in_shares\n"
-        "runner.in_shares = lambda f, *a: split.append(getattr(f, 'func', f).__name__) or split_runs(f, *a)\n"
+        "import ddtrack.runner as runner, ddtrack.studies.batches as batches\nsplit, split_runs = [], in_shares\n"
+        "record = lambda f, *a: split.append(getattr(f, 'func', f).__name__) or split_runs(f, *a)\n"
+        "runner.in_shares = batches.in_shares = record\n"
         "print(json.dumps(monte_carlo(nn, [0, 1, 2, 3], chunk_size=4)))\n"
         "assert split == ['batched', '_metric_series'], split\n"  # the identification (vmap_runs), the simulation
     )
@@ -208,7 +210,7 @@ def test_ctrl_c_returns_without_waiting_for_the_shares_still_computing():
     given up."""
     script = (
         "import jax, signal, threading, time; jax.config.update('jax_num_cpu_devices', 2)\n"
-        "from ddtrack.runner import in_shares\n"
+        "from ddtrack.sim.batch import in_shares\n"
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"  # as in a terminal; a background job ignores it
         "main, started = threading.main_thread().ident, threading.Barrier(2)\n"
         "release, released = threading.Event(), []\n"

@@ -17,7 +17,7 @@ import pytest
 from ddtrack.cli import main
 from ddtrack.metrics import pooled_improvement
 from ddtrack.robots import PRESETS
-from ddtrack.scenario_suite import bench_entries, board_markdown, plan_entries
+from ddtrack.studies.scenario_suite import bench_entries, board_markdown, plan_entries
 
 SCENARIO = """name = "{name}"
 description = "{name} gains"

@@ -246,7 +246,7 @@ def test_adaptive_run_writes_gains_and_identification(tmp_path, cli):
 
 @pytest.mark.slow
 def test_reproduce_exits_1_when_the_adaptive_controller_loses(tmp_path, cli, monkeypatch):
-    import ddtrack.reproduce as reproduce_module
+    import ddtrack.studies.reproduce as reproduce_module
 
     losing = {
         "seeds": 1,

@@ -25,8 +25,9 @@ from conftest import SCENARIOS
 
 import ddtrack
 from ddtrack._ordered import total
-from ddtrack.runner import monte_carlo, prepare, prepare_batch, row, run_batch
+from ddtrack.runner import prepare, prepare_batch, row, run_batch
 from ddtrack.scenario import CONTROLLERS
+from ddtrack.studies.batches import monte_carlo
 
 # Gaussian wheel disturbance, pose noise and a random plant mass: every random stream is drawn
 RANDOM = [
@@ -218,7 +219,7 @@ def test_reproduce_runs_each_variant_as_a_batch_whose_rows_are_the_single_runs(m
     identify share one batch of identifications. Each seed's metrics, and seed 0's series, are those of the same
     seeds' batch run alone, identifying on its own (that a batch's row is its single run, identification included,
     is the tests' above to check)."""
-    import ddtrack.reproduce as reproduce_module
+    import ddtrack.studies.reproduce as reproduce_module
 
     handed = []  # the identification each variant's batch was handed (None: it identifies, or needs none)
 

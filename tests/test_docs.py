@@ -85,4 +85,5 @@ def test_the_site_builds_strict(tmp_path):
     )
     assert built.returncode == 0, built.stderr[-4000:]
     api = (tmp_path / "site" / "api" / "runner" / "index.html").read_text()
-    assert all(f'id="ddtrack.runner.{name}"' in api for name in ("run", "run_batch", "monte_carlo", "prepare"))
+    assert all(f'id="ddtrack.runner.{name}"' in api for name in ("run", "run_batch", "prepare"))
+    assert 'id="ddtrack.studies.batches.monte_carlo"' in api

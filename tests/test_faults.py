@@ -240,7 +240,7 @@ def test_sweep_carries_on_past_an_unstable_value(tmp_path, cli):
             "controller.kc=[10, 10]",
         ],
     )
-    direct = {row["seed"]: row for row in ddtrack.runner.monte_carlo(scenario, [0, 1], chunk_size=2)}
+    direct = {row["seed"]: row for row in ddtrack.studies.batches.monte_carlo(scenario, [0, 1], chunk_size=2)}
     assert sorted(r["seed"] for r in by_kc[(10.0, 10.0)]) == [0, 1]
     for record in by_kc[(10.0, 10.0)]:
         assert record["status"] == "ok"

@@ -15,8 +15,9 @@ import ddtrack
 from ddtrack.adaptation import adaptation_warnings
 from ddtrack.controllers import emulator_scales
 from ddtrack.identification import identification_scale, identify
-from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
+from ddtrack.runner import prepare, prepare_batch, run_setup
 from ddtrack.sim import stack, vmap_runs
+from ddtrack.studies.batches import batch_metrics
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 BURGER = SCENARIOS / "burger_sized_20hz.toml"

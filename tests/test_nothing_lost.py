@@ -18,10 +18,11 @@ from pathlib import Path
 import pytest
 from conftest import SCENARIOS
 
-import ddtrack.mc
 import ddtrack.runner
-from ddtrack import outdir, sweep
+import ddtrack.studies.mc
+from ddtrack import outdir
 from ddtrack.errors import RunError
+from ddtrack.studies import sweep
 
 SHORT = ("--set", "simulation.duration=1.0", "--set", "simulation.metric_window=[0.0, 1.0]")
 
@@ -195,7 +196,7 @@ def refuse_to_simulate(*args, **kwargs):
 )
 def test_read_only_output_fails_before_simulating(mount, cli, monkeypatch, command):
     monkeypatch.setattr(ddtrack.runner, "run_setup", refuse_to_simulate)
-    monkeypatch.setattr(ddtrack.mc, "run_specs", refuse_to_simulate)
+    monkeypatch.setattr(ddtrack.studies.mc, "run_specs", refuse_to_simulate)
     disk = mount("64k", read_only=True)  # read-only even for root
     code, _, stderr = cli(*command, "--out", disk / "out")
     assert_clean_error(code, stderr, "cannot be written", cause="Read-only file system")
@@ -203,7 +204,7 @@ def test_read_only_output_fails_before_simulating(mount, cli, monkeypatch, comma
 
 
 def test_output_under_a_file_fails_before_simulating_mc(tmp_path, cli, monkeypatch):
-    monkeypatch.setattr(ddtrack.mc, "run_specs", refuse_to_simulate)
+    monkeypatch.setattr(ddtrack.studies.mc, "run_specs", refuse_to_simulate)
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
     code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", "--out", blocker / "mc")

@@ -14,9 +14,10 @@ from conftest import ROOT, SCENARIOS
 import ddtrack
 from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams
-from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_setup
+from ddtrack.runner import prepare, prepare_batch, run_setup
 from ddtrack.scenario import registry
 from ddtrack.sim.simulate import recorded
+from ddtrack.studies.batches import batch_metrics
 
 sys.path.insert(0, str(ROOT / "examples" / "plugin" / "src"))  # the example plugin, as installed
 from ddtrack_integral_kanayama import wheel_angles

@@ -104,9 +104,10 @@ def test_a_slip_run_meets_its_motors_curve_alone_and_as_a_batch_row():
     """The TurtleBot3 Waffle Pi of the robots suite on its filleted square, over cmd_vel on its slip plant: its
     servos apply torques within their curve at the wheels' spin, and ``ddtrack mc``'s batch path (which keeps only the
     series the metrics read) checks them at the same speeds as the run alone."""
-    from ddtrack.robot_suite import ROBOTS, base_scenario, suite_entry
-    from ddtrack.runner import batch_metrics, prepare, prepare_batch, run_record, run_setup
+    from ddtrack.runner import prepare, prepare_batch, run_record, run_setup
     from ddtrack.scenario.files import validate_scenario
+    from ddtrack.studies.batches import batch_metrics
+    from ddtrack.studies.robot_suite import ROBOTS, base_scenario, suite_entry
 
     data = base_scenario(ROBOTS["turtlebot3_waffle_pi"], suite_entry("kinematic_backstepping"), "square")
     data["simulation"] |= {"duration": 12.0, "metric_window": [0.0, 12.0]}  # the first corner

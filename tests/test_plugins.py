@@ -85,7 +85,7 @@ def test_registration_checks_the_config():
 
 
 def test_tune_goes_by_the_registry(registered, tmp_path):
-    from ddtrack.tune import problems
+    from ddtrack.studies.tune import problems
 
     assert ddtrack.scenario.tunable_kinds() == ["backstepping"]  # differentiable, Kanayama, torque
     scenario = ddtrack.load_scenario(_scenario_file(tmp_path, "test_kanayama"), overrides=SHORT)
@@ -202,9 +202,9 @@ def test_the_benches_take_a_registered_kind_by_name_and_rank_only_closed_loop_ki
     """A kind registered from Python (as a plugin's is) is in every bench's default selection and accepted by
     ``--controllers`` (``--suite robots``, ``--scenario``, the quick and standard suites); a kind that plays a plan
     back (``replay``) is neither, and naming it says why."""
-    from ddtrack.robot_suite import RobotSuite, default_entries, entry_labels, plan_robot_suite
-    from ddtrack.scenario_suite import bench_entries
-    from ddtrack.suite import TUNED, controller_names
+    from ddtrack.studies.robot_suite import RobotSuite, default_entries, entry_labels, plan_robot_suite
+    from ddtrack.studies.scenario_suite import bench_entries
+    from ddtrack.studies.suite import TUNED, controller_names
 
     assert not controller_kinds()["replay"].tracks_reference and controller_kinds()["test_kanayama"].tracks_reference
     assert "test_kanayama" in default_entries() and "replay" not in default_entries()

@@ -12,12 +12,12 @@ import pytest
 from distributed import Client, LocalCluster
 
 from ddtrack.compilations import counting_programs
-from ddtrack.robot_suite import RobotSuite, plan_robot_suite
-from ddtrack.runner import monte_carlo
+from ddtrack.studies.batches import monte_carlo
 from ddtrack.studies.cells import planned_key
+from ddtrack.studies.robot_suite import RobotSuite, plan_robot_suite
+from ddtrack.studies.suite import BASELINE, SUITES, TUNED, plan_suite
+from ddtrack.studies.sweep import read_records, run_sweep
 from ddtrack.studies.tasks import finite, plan_tasks
-from ddtrack.suite import BASELINE, SUITES, TUNED, plan_suite
-from ddtrack.sweep import read_records, run_sweep
 
 SHORT = ("simulation.duration=1.0", "simulation.metric_window=[0.0, 1.0]")
 SIMULATION = "jit(_metric_series)"  #: the batch program a study's tasks run (studies.cells.cells_rows)
@@ -82,3 +82,4 @@ def test_the_quick_suite_runs_its_cells_as_one_batch_with_each_cells_bits(tmp_pa
             (record,) = [r for r in records.values() if r["configuration"] == configuration.describe() and
                          r["seed"] == row["seed"]]  # fmt: skip
             assert record["metrics"] == finite({k: v for k, v in row.items() if k != "seed"})
+

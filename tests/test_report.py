@@ -91,7 +91,7 @@ def bench_folder(tmp_path_factory):
     """A tiny finished bench suite (the real runner on an in-process Dask cluster; tuned gains given)."""
     from distributed import Client, LocalCluster
 
-    from ddtrack.suite import Suite, run_suite
+    from ddtrack.studies.suite import Suite, run_suite
 
     out = tmp_path_factory.mktemp("report_bench")
     (out / "tuned.toml").write_text('[controller]\nkind = "backstepping"\ngains = [2.0, 80.0, 20.0]\n')  # no tuning
@@ -119,9 +119,9 @@ def reproduce_folder(tmp_path_factory):
     half a minute; ``ddtrack reproduce`` itself is tested in test_cli), with PNG figures beside it."""
     import matplotlib.pyplot as plt
 
-    from ddtrack.reproduce import CASES, CaseResult, summarise_case
     from ddtrack.scenario import load_scenario
     from ddtrack.shipped import scenario_path
+    from ddtrack.studies.reproduce import CASES, CaseResult, summarise_case
 
     out = tmp_path_factory.mktemp("report_reproduce")
     cases = {}
@@ -289,7 +289,7 @@ def test_bench_report_in_chromium(bench_folder, chromium, tmp_path):
 
 
 def test_reproduce_report_shows_table_1_beside_the_paper(reproduce_folder, chromium, tmp_path):
-    from ddtrack.reproduce import PAPER_TABLE
+    from ddtrack.studies.reproduce import PAPER_TABLE
 
     html = (reproduce_folder / "report.html").read_text()
     _assert_self_contained(html)
@@ -371,7 +371,7 @@ def _payload_run(tmp_path: Path) -> Path:
 def _payload_mc(tmp_path: Path) -> Path:
     """An mc folder written by the real writer, whose controllers carry the payload (a hand-made folder: a
     controller's name must be registered to run)."""
-    from ddtrack import mc
+    from ddtrack.studies import mc
 
     def row(seed: int, error: float, gains: list[float] | None) -> dict:
         return {
@@ -401,8 +401,8 @@ def _payload_mc(tmp_path: Path) -> Path:
 def _payload_bench(tmp_path: Path) -> Path:
     """A bench folder from the real record, results and leaderboard code, with payloads in the controller, the
     trajectory and the level labels."""
-    from ddtrack.suite import leaderboard
-    from ddtrack.sweep import write_results
+    from ddtrack.studies.suite import leaderboard
+    from ddtrack.studies.sweep import write_results
 
     records = []
     for c, controller in enumerate(("backstepping", PAYLOAD)):
@@ -571,7 +571,7 @@ def robots_folder(tmp_path_factory):
     from distributed import Client
 
     from ddtrack.cluster import local_cluster
-    from ddtrack.robot_suite import RobotSuite, run_robot_suite
+    from ddtrack.studies.robot_suite import RobotSuite, run_robot_suite
 
     out = tmp_path_factory.mktemp("report_robots")
     suite = RobotSuite(

@@ -14,8 +14,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from ddtrack.metrics import pooled_improvement
-from ddtrack.robot_board import agreement_by_path, paired, ranking_agreement, robot_board
-from ddtrack.robot_suite import (
+from ddtrack.robots import PRESETS
+from ddtrack.studies.robot_board import agreement_by_path, paired, ranking_agreement, robot_board
+from ddtrack.studies.robot_suite import (
     ROBOTS,
     RobotSuite,
     cells,
@@ -23,7 +24,6 @@ from ddtrack.robot_suite import (
     plan_robot_suite,
     run_robot_suite,
 )
-from ddtrack.robots import PRESETS
 
 SHORT = ("simulation.duration=4", "simulation.metric_window=[1, 4]")
 
@@ -142,7 +142,7 @@ def test_the_boards_rank_by_the_nominal_condition_and_pair_by_cell():
 
 
 def test_runs_that_lose_the_path_are_counted_apart_and_never_decide_the_pooled_verdict():
-    from ddtrack.robot_board import board_markdown, rows
+    from ddtrack.studies.robot_board import board_markdown, rows
 
     def records(lost_error):
         """Two laws on 2 conditions x 4 seeds; at 150 ms the candidate loses the path in seeds 0-2 and the

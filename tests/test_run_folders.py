@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 from conftest import SCENARIOS
 
-import ddtrack.mc
 import ddtrack.runner
+import ddtrack.studies.mc
 from ddtrack import outdir
 from ddtrack.errors import RunError
 
@@ -57,7 +57,7 @@ def test_another_commands_output_is_refused_without_overwrite(tmp_path, cli, mon
     out = tmp_path / "out"
     assert cli("run", SCENARIOS / "paper_line.toml", *SHORT, "--out", out)[0] == 0
     before = snapshot(out)
-    monkeypatch.setattr(ddtrack.mc, "run_specs", refuse_to_simulate)
+    monkeypatch.setattr(ddtrack.studies.mc, "run_specs", refuse_to_simulate)
     code, _, stderr = cli("mc", SCENARIOS / "paper_line.toml", "-n", "2", *SHORT, "--out", out)
     assert code == 2 and "Traceback" not in stderr
     assert "`ddtrack run`" in stderr and "--overwrite" in stderr and str(out) in stderr

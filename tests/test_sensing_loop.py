@@ -356,8 +356,9 @@ def test_each_seed_draws_its_own_gyro_noise():
 @pytest.mark.slow
 def test_a_batch_and_the_environment_see_the_sensing_chain():
     from ddtrack.envs import DiffDriveTrackingEnv
-    from ddtrack.runner import monte_carlo, row, run_batch
+    from ddtrack.runner import row, run_batch
     from ddtrack.runner import run as run_scenario
+    from ddtrack.studies.batches import monte_carlo
 
     fix = ["sensing.fix_period=0.5", "sensing.fix_position_std=0.01", "sensing.fix_heading_std=0.01"]
     scenario = ddtrack.load_scenario(BURGER, overrides=[*SHORT, *fix])

@@ -9,7 +9,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ddtrack.suite import TUNED, Suite, plan_suite, run_suite
+from ddtrack.studies.suite import TUNED, Suite, plan_suite, run_suite
 
 SHORT = ("simulation.duration=4", "simulation.metric_window=[1, 4]")
 TINY = Suite(
@@ -119,7 +119,7 @@ def test_every_suite_plans_with_its_default_controllers(name):
     """``bench --suite quick`` and ``standard`` without ``--controllers`` rank every kind that tracks a reference in
     closed loop: every cell of every one resolves (a kind that needs a plan, replay, once made both exit 2)."""
     from ddtrack.scenario import tracking_kinds
-    from ddtrack.suite import SUITES, controller_names
+    from ddtrack.studies.suite import SUITES, controller_names
 
     names = controller_names(None)
     assert names == [*tracking_kinds(), TUNED] and "replay" not in names

@@ -18,9 +18,9 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import SCENARIOS
 
-from ddtrack.runner import monte_carlo
 from ddtrack.scenario import load_scenario
-from ddtrack.sweep import plan_sweep, read_records, read_sweep
+from ddtrack.studies.batches import monte_carlo
+from ddtrack.studies.sweep import plan_sweep, read_records, read_sweep
 
 PYTHON = sys.executable
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -41,7 +41,7 @@ def write_sweep(folder: Path, *, masses=(9.0, 11.0), seeds: int = 3, chunk: int 
 
 
 def direct(masses, seeds) -> dict[tuple[float, int], dict]:
-    """The same runs through runner.monte_carlo, by (mass, seed)."""
+    """The same runs through studies.batches.monte_carlo, by (mass, seed)."""
     rows = {}
     for mass in masses:
         overrides = [f"{k}={json.dumps(v)}" for k, v in {**SHORT, "robot.mass": mass}.items()]
@@ -171,8 +171,8 @@ def test_a_failing_task_is_recorded_and_retried_on_resume(tmp_path, monkeypatch)
     import jax
     from distributed import Client, LocalCluster
 
+    import ddtrack.studies.sweep as sweep
     import ddtrack.studies.tasks as tasks
-    import ddtrack.sweep as sweep
 
     path = write_sweep(tmp_path, masses=(10.0,), seeds=2)
     plan = plan_sweep(read_sweep(path), tmp_path)

@@ -11,7 +11,7 @@ import pytest
 from conftest import SCENARIOS, central_difference
 
 import ddtrack
-from ddtrack.tune import DEFAULT_GAMMA, problems, total_loss
+from ddtrack.studies.tune import DEFAULT_GAMMA, problems, total_loss
 
 # 3 s from 0.3 m off the line: the gains act from the start (no clamp-dominated transient), the window is [1, 3] s
 SHORT = ["simulation.duration=3", "simulation.metric_window=[1, 3]", "initial.pose=[0, 0.3, 0]"]

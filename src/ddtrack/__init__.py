@@ -42,7 +42,6 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .metrics import summarize as summarize
     from .metrics import tracking_error as tracking_error
     from .precision import enable_float64 as enable_float64
-    from .runner import monte_carlo as monte_carlo
     from .runner import prepare as prepare
     from .runner import run as run
     from .runner import run_batch as run_batch
@@ -56,6 +55,7 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .sim import SimResult as SimResult
     from .sim import simulate as simulate
     from .sim import timeseries as timeseries
+    from .studies.batches import monte_carlo as monte_carlo
 
 __version__ = "0.1.0"
 
@@ -66,7 +66,7 @@ _SOURCES = {
     "improvement": "metrics",
     "summarize": "metrics",
     "tracking_error": "metrics",
-    "monte_carlo": "runner",
+    "monte_carlo": "studies.batches",
     "prepare": "runner",
     "run": "runner",
     "run_batch": "runner",

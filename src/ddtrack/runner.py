@@ -1,4 +1,6 @@
-"""Seeds and randomness, single runs, batches and Monte Carlo (docs/architecture.md).
+"""Seeds and randomness, single runs and batches, and what a run's metrics and warnings are (docs/architecture.md).
+
+Studies of many runs that keep only their metrics are in :mod:`ddtrack.studies.batches`.
 
 One seed is split, in a fixed order, into streams for the plant-parameter draw, the disturbance,
 the measurement noise and the controller. So swapping the controller leaves the plant and its
@@ -12,7 +14,6 @@ from collections.abc import Callable, Sequence
 from functools import partial
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
@@ -20,18 +21,16 @@ from . import feasibility
 from .adaptation import adaptation_warnings
 from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
 from .compilations import padded_length
-from .controllers import Controller, Emulator, TorqueLaw
+from .controllers import Emulator, TorqueLaw
 from .identification import Identification, identify
-from .layout import BODY, POSTURE_ERROR, WHEEL_TORQUES
-from .metrics import lost_path_warnings, summarize, tracking_error
-from .model import MeasurementNoise, Plant, RobotParams, WheelDisturbance
-from .model.sensed import ODOMETRY_ERROR
+from .layout import BODY, WHEEL_TORQUES
+from .metrics import lost_path_warnings, summarize
+from .model import MeasurementNoise, RobotParams, WheelDisturbance
 from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import check_drive, motor_or_none
-from .sim import STATUS_NAMES, Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
+from .sim import Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .sim.batch import Batched, in_shares
-from .trajectories import Trajectory
 from .trajectories.switched import TrajectoryFrame
 
 STREAMS = ("parameters", "disturbance", "noise", "controller")
@@ -273,21 +272,15 @@ def run_options(scenario: Scenario) -> dict:
     chunk): keyword arguments of ``ddtrack.sim.simulate`` and its batched forms."""
     return {
         "n_steps": scenario.simulation.n_steps,
-        **_timing(scenario),
+        **timing(scenario),
         "divergence_error": scenario.divergence_distance(),
     }
 
 
-def _timing(scenario: Scenario) -> dict:
+def timing(scenario: Scenario) -> dict:
+    """The control period and the substeps a simulation of ``scenario`` takes (static arguments)."""
     sim = scenario.simulation
     return {"control_period": sim.control_period, "substeps": sim.substeps}
-
-
-#: the series metrics and warnings read
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", "slip_r", "slip_l", "slip_lateral",
-               *ODOMETRY_ERROR.names)  # fmt: skip
-#: a slip plant's wheel spin speeds, at which the motor's curve is checked (:func:`traction_columns`)
-WHEEL_SPINS = ("phidot_r", "phidot_l")
 
 
 def loading_warnings(scenario: Scenario) -> list[dict]:
@@ -363,135 +356,6 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
     return columns, metrics
 
 
-@partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def _metric_series(
-    plant: Plant,
-    controller: Controller,
-    trajectory: Trajectory,
-    x0: Array,
-    draws: Draws,
-    disturbance: WheelDisturbance,
-    noise: MeasurementNoise,
-    divergence_error: Array,
-    **steps: int,
-) -> tuple[dict, Array, Array]:
-    """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
-    recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md).
-    ``divergence_error`` holds each run's bound [m], so runs of different scenarios can share the batch."""
-    result = simulate_batch(
-        plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error=divergence_error, **steps
-    )
-    series = {
-        "e_xy": POSTURE_ERROR.span(result.error, "e_x", "e_y"),  # e_tr in NumPy on the host, as timeseries does
-        "v": BODY.read(result.state, "v"),
-        "omega": BODY.read(result.state, "omega"),
-    }  # for the grip the run needed
-    series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
-    series |= {name: value for name, value in result.plant_state.items() if name in WHEEL_SPINS}
-    return series, result.status, result.failure_index
-
-
 def batch_runs(setup: Setup, draws: Draws) -> tuple:
     """The arguments of a prepared batch's simulation, in :func:`_metric_series`'s order (without the bound)."""
     return (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
-
-
-def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs`, or several scenarios' runs of one
-    structure joined along the run axis) with the timing of ``scenario``, split over the devices
-    (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays."""
-    series = partial(_metric_series, n_steps=scenario.simulation.n_steps, **_timing(scenario))
-    return jax.tree_util.tree_map(np.asarray, in_shares(series, *runs, divergence_error))
-
-
-def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
-    """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
-    runs = batch_runs(setup, draws)
-    bounds = np.full(len(np.asarray(setup.x0)), scenario.divergence_distance())
-    return series_metrics(scenario, setup, *metric_series(scenario, runs, bounds))
-
-
-def series_metrics(
-    scenario: Scenario, setup: Setup, series: dict, status: np.ndarray, failure_index: np.ndarray
-) -> list[dict]:
-    """The metrics of each run of a batch from its :func:`metric_series` (the rows of ``setup``'s runs)."""
-    sim = scenario.simulation
-    series = dict(series)
-    e_xy = series.pop("e_xy")
-    series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
-    t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
-    no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
-    nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
-    lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
-    loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
-    metrics = []
-    for i in range(len(status)):
-        k = int(failure_index[i])
-        valid = slice(0, sim.n_steps if k < 0 else k + 1)
-        columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
-        columns = {name: value[valid] for name, value in columns.items()}
-        columns |= traction_columns(
-            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, scenario
-        )
-        metrics.append(
-            run_metrics(
-                scenario,
-                columns,
-                status=STATUS_NAMES[int(status[i])],
-                failure_time=None if k < 0 else float(t[k]),
-                nmse=None if nmse is None else nmse[i],
-                lost_path_error=lost_path_error,
-                loaded=loaded,
-            )
-        )
-    return metrics
-
-
-def drawn_plant(scenario: Scenario, setup: Setup, i: int) -> dict[str, float]:
-    """``plant_<field>`` of run ``i`` of a prepared batch, for each ``[randomize]`` draw (in its unit)."""
-    drawn = [field for field, draw in scenario.randomize if draw is not None]
-    return {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
-
-
-def monte_carlo(
-    scenario: Scenario,
-    seeds: Sequence[int],
-    *,
-    chunk_size: int = 64,
-    on_chunk: Callable[[int], None] = lambda done: None,
-    frame: TrajectoryFrame | None = None,
-) -> list[dict]:
-    """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
-    the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
-
-    The last chunk is padded with repeats of its first seed, so every chunk has one shape and compiles once.
-
-    Parameters
-    ----------
-    scenario : Scenario
-        A validated scenario; its ``[randomize]`` draws differ per seed.
-    seeds : sequence of int
-        One run per seed.
-    chunk_size : int
-        Runs per vmapped batch.
-    on_chunk : callable
-        Called with the number of runs done after each chunk (a progress bar).
-    frame : TrajectoryFrame, optional
-        A study's trajectory kinds (:func:`~ddtrack.trajectories.switched.trajectory_frame`): its cells on
-        different trajectories then share one program.
-
-    Returns
-    -------
-    list of dict
-        Per seed: ``seed``, ``plant_<field>`` for each drawn plant parameter (in its unit), and the
-        :func:`ddtrack.summarize` metrics.
-    """
-    rows: list[dict] = []
-    for start in range(0, len(seeds), chunk_size):
-        chunk = list(seeds[start : start + chunk_size])
-        padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
-        setup, draws = prepare_batch(scenario, padded, frame=frame)
-        for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):
-            rows.append({"seed": seed, **drawn_plant(scenario, setup, i), **metrics})
-        on_chunk(len(rows))
-    return rows

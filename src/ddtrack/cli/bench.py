@@ -123,7 +123,7 @@ def bench(
     if suite_name == "robots":
         return _bench_robots(controllers, overrides, out, overwrite, scheduler, scheduler_file, workers)
     from ..outdir import check_output, start_resumable
-    from ..suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
+    from ..studies.suite import SUITES, board_markdown, cell_means, controller_names, plan_suite, run_suite
 
     suite_name = suite_name or "quick"
     names = controller_names(_names(controllers))
@@ -135,7 +135,7 @@ def bench(
     with dask_client(scheduler, scheduler_file, workers) as client, progress_bar(0, "runs") as advance:
         start_resumable(out, command="bench", study=study, resume=resume)
         summary = run_suite(suite, names, out, client, **study_progress(advance))
-    from ..sweep import read_records
+    from ..studies.sweep import read_records
 
     click.echo(board_markdown(summary["leaderboard"], cell_means(read_records(out))), nl=False)
     click.echo(
@@ -162,7 +162,7 @@ def _bench_robots(
 ) -> int:
     """``bench --suite robots``: every cell planned first (bad input writes nothing), then run and summarised."""
     from ..outdir import check_output, start_resumable
-    from ..robot_suite import RobotSuite, board_markdown, entry_labels, plan_robot_suite, run_robot_suite
+    from ..studies.robot_suite import RobotSuite, board_markdown, entry_labels, plan_robot_suite, run_robot_suite
 
     names = entry_labels(_names(controllers))
     suite = RobotSuite(overrides=overrides)
@@ -196,7 +196,7 @@ def _bench_scenarios(
 ) -> int:
     """``bench --scenario``: every entry read and checked first (bad input writes nothing), then run and ranked."""
     from ..outdir import check_output, start_resumable
-    from ..scenario_suite import FIGURE, bench_entries, board_markdown, run_scenario_bench
+    from ..studies.scenario_suite import FIGURE, bench_entries, board_markdown, run_scenario_bench
 
     entries = bench_entries(paths, _names(controllers) or (), overrides)
     study = f"scenario: {', '.join(e.label for e in entries)}" + _changed(

@@ -42,8 +42,8 @@ def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
 
     check_output(out, command="reproduce", overwrite=overwrite)
     enable_compilation_cache()
-    from ..reproduce import nn_beats_backstepping, table_markdown
-    from ..reproduce import reproduce as run_reproduce
+    from ..studies.reproduce import nn_beats_backstepping, table_markdown
+    from ..studies.reproduce import reproduce as run_reproduce
 
     with staged_folder(out, command="reproduce") as stage:
         table = run_reproduce(stage, seeds=seeds, ablations=ablations)
@@ -104,8 +104,8 @@ def mc(
             f"'{controllers}' must name distinct controllers, comma-separated",
             "e.g. --controllers backstepping,nn_adaptive_backstepping",
         )
-    from ..mc import format_summary, load_specs, run_specs, summarise, write
     from ..scenario import MAX_SEED
+    from ..studies.mc import format_summary, load_specs, run_specs, summarise, write
 
     if seed + n - 1 > MAX_SEED:
         raise ConfigError(
@@ -209,8 +209,8 @@ def tune(
     (the paper's cost, eq. 22, summed over each run's metric window, averaged over scenarios and seeds)."""
     from ..outdir import check_output, staged_folder
     from ..scenario import kanayama_gains, load_scenario, tunable_kinds
-    from ..tune import problems, write
-    from ..tune import tune as run_tuning
+    from ..studies.tune import problems, write
+    from ..studies.tune import tune as run_tuning
 
     if controller not in tunable_kinds():
         raise ConfigError(
@@ -280,7 +280,7 @@ def sweep(
     Without --scheduler or --scheduler-file, an embedded cluster on 127.0.0.1 runs it.
     """
     check_cluster_options(scheduler, scheduler_file, workers)
-    from ..sweep import plan_sweep, read_sweep, run_sweep
+    from ..studies.sweep import plan_sweep, read_sweep, run_sweep
 
     spec = read_sweep(sweep_file)
     plan = plan_sweep(spec, sweep_file.parent)  # every configuration resolved: bad input writes nothing

@@ -5,7 +5,7 @@ its delay, the trajectory it follows in the study's frame. Runs whose simulation
 (:func:`program_key`: the pytree structure of plant, controller, trajectory, noise and draws, each leaf's shape and
 type, the run's length, substeps and control period) are joined along the run axis, each with its own divergence
 bound, and simulated in one batched call; each cell's rows then become its metrics under its own scenario
-(:func:`~ddtrack.runner.series_metrics`). A ledger beside JAX's persistent compilation cache
+(:func:`~ddtrack.studies.batches.series_metrics`). A ledger beside JAX's persistent compilation cache
 (:func:`ddtrack.compilations.compiled_programs`) records the programs studies compiled into it, so a study says at
 its start how many programs it needs and how many the cache already holds.
 """
@@ -20,10 +20,11 @@ import jax
 import numpy as np
 
 from ..compilations import compiled_programs, ledger_entry, record_compiled
-from ..runner import batch_runs, drawn_plant, metric_series, prepare_batch, series_metrics
+from ..runner import batch_runs, prepare_batch
 from ..scenario import Scenario, Setup
 from ..sim import Draws
 from ..trajectories.switched import TrajectoryFrame
+from .batches import drawn_plant, metric_series, series_metrics
 
 #: the most runs a ``bench`` suite's task batches across its cells: below 16 runs a batch, every row is its single
 #: run's bits (docs/reliability.md), and two shares of 7 keep both cores busy
@@ -73,7 +74,7 @@ def _padded(tree: Any, size: int) -> Any:
 
 
 def cells_rows(cells: Sequence[tuple[Prepared, Sequence[int]]], size: int) -> list[list[dict]]:
-    """Each cell's rows (as :func:`ddtrack.runner.monte_carlo` gives them: ``seed``, the plant's drawn values, the
+    """Each cell's rows (as :func:`.batches.monte_carlo` gives them: ``seed``, the plant's drawn values, the
     metrics), the runs of the cells that share a :func:`program_key` simulated together in batches of ``size`` (the
     last padded with copies of its first run, so every batch of a structure is one program). ``cells``: each cell's
     prepared runs and their seeds. A batch's rows are the bits a batch of ``size`` gives them."""

@@ -30,13 +30,13 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .errors import ConfigError, did_you_mean
-from .metrics import warning_counts
-from .outdir import atomic_write
-from .scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
-from .studies.cells import cache_on_every_worker, programs_held
-from .studies.tasks import ERROR, error_record, error_records, plan_tasks, planned_keys, run_cells
-from .trajectories.switched import TrajectoryFrame, trajectory_frame
+from ..errors import ConfigError, did_you_mean
+from ..metrics import warning_counts
+from ..outdir import atomic_write
+from ..scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
+from ..trajectories.switched import TrajectoryFrame, trajectory_frame
+from .cells import cache_on_every_worker, programs_held
+from .tasks import ERROR, error_record, error_records, plan_tasks, planned_keys, run_cells
 
 RECORDS = "records"
 

@@ -20,14 +20,14 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from ._format import with_interval
-from .metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
-from .outdir import atomic_write
-from .plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
-from .runner import prepare_batch, row, run_setup
-from .scenario import Scenario, load_scenario
-from .shipped import scenario_path
-from .sim import timeseries
+from .._format import with_interval
+from ..metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
+from ..outdir import atomic_write
+from ..plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
+from ..runner import prepare_batch, row, run_setup
+from ..scenario import Scenario, load_scenario
+from ..shipped import scenario_path
+from ..sim import timeseries
 
 #: The paper's Table 1: mean tracking error [m] and improvement [%] (its 52.04 % rounds to 52.05).
 PAPER_TABLE = {

@@ -1,11 +1,11 @@
 """``ddtrack bench --scenario FILE ...``: controllers compared on the user's own robot.
 
 Each ``--scenario`` file is one entry, labelled by its file stem; ``--controllers`` adds the robots suite's entries
-(:func:`ddtrack.robot_suite.suite_entry`), each with its defaults for the first file's robot
-(:func:`ddtrack.robot_suite.entry_controller`). A fair comparison changes only the controller, so every entry's
+(:func:`ddtrack.studies.robot_suite.suite_entry`), each with its defaults for the first file's robot
+(:func:`ddtrack.studies.robot_suite.entry_controller`). A fair comparison changes only the controller, so every entry's
 resolved scenario must equal the first file's outside ``[controller]`` (and :data:`IGNORED`), and every entry must
 drive the scenario's plant (a velocity law on a torque plant would drive an ideal unicycle instead; a torque law
-cannot drive a velocity plant). Every entry runs seeds 0 .. N-1 through :func:`ddtrack.sweep.run_sweep` (resumable,
+cannot drive a velocity plant). Every entry runs seeds 0 .. N-1 through :func:`.sweep.run_sweep` (resumable,
 keyed by hash) on common random numbers: seed s gives every entry the same plant draw, disturbance and noise, so
 the entries pair by seed, and each entry's improvement over the first file's is paired that way.
 """
@@ -21,7 +21,10 @@ from typing import Any
 
 import pyarrow as pa
 
-from ._format import interval_text, significant
+from .._format import interval_text, significant
+from ..errors import ConfigError
+from ..metrics import pooled_improvement
+from ..scenario import Scenario, controller_output, load_scenario, plant_kind, to_toml_dict, validate_scenario
 from .board import (
     GRIP,
     MOTOR,
@@ -33,11 +36,8 @@ from .board import (
     warning_codes,
     write_board,
 )
-from .errors import ConfigError
-from .metrics import pooled_improvement
+from .cells import SUITE_TASK
 from .robot_suite import default_entries, entry_controller, entry_labels, suite_entry
-from .scenario import Scenario, controller_output, load_scenario, plant_kind, to_toml_dict, validate_scenario
-from .studies.cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 
 STUDY = "scenario"  #: the ``label.study`` of every run of a scenario bench
@@ -232,7 +232,7 @@ def rows(records: Mapping[str, dict]) -> list[dict]:
 
 
 def leaderboard(records: Mapping[str, dict], entries: Sequence[BenchEntry]) -> list[dict]:
-    """Per entry: the statistics of its runs (:func:`ddtrack.board.run_statistics`), runs ok, diverged (or
+    """Per entry: the statistics of its runs (:func:`ddtrack.studies.board.run_statistics`), runs ok, diverged (or
     non-finite) and raised, runs that lost the path, runs flagged for grip and for the motors, each seed's mean
     e_tr, and the pooled paired improvement of the mean e_tr over the first entry's, by seed, over the seeds where
     both tracked; ranked by mean e_tr."""

@@ -1,7 +1,7 @@
 """``ddtrack bench``: controllers x trajectories x uncertainty levels x seeds, and a robustness map, on common
 random numbers, through the sweep runner; a leaderboard and its figures.
 
-Every cell is a resolved scenario run by :func:`ddtrack.sweep.run_sweep` (vmapped chunks on Dask, records keyed by
+Every cell is a resolved scenario run by :func:`.sweep.run_sweep` (vmapped chunks on Dask, records keyed by
 hash, resumable). Seed s gives every controller the same plant draw, disturbance and noise, so improvements are
 paired by (trajectory, level, seed). ``backstepping_tuned`` is backstepping with the gains ``ddtrack tune`` finds on
 the paper's two cases (the suite runs the tuning first and keeps its result in ``tuned.toml``).
@@ -20,15 +20,15 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ._format import interval_text as _ci
-from ._format import significant
+from .._format import interval_text as _ci
+from .._format import significant
+from ..errors import ConfigError
+from ..metrics import pooled_improvement
+from ..outdir import atomic_write
+from ..scenario import controller_kinds, kanayama_gains, load_scenario, tracking_kinds
+from ..shipped import scenario_path
 from .board import STATISTICS, interval_columns, run_statistics, tracking_value, write_board
-from .errors import ConfigError
-from .metrics import pooled_improvement
-from .outdir import atomic_write
-from .scenario import controller_kinds, kanayama_gains, load_scenario, tracking_kinds
-from .shipped import scenario_path
-from .studies.cells import SUITE_TASK
+from .cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep, toml_value
 from .tune import problems, tune
 

@@ -1,5 +1,5 @@
-"""What every ``ddtrack bench`` leaderboard shares (the suites' :mod:`ddtrack.suite`, :mod:`ddtrack.robot_board` and
-the user's own scenarios' :mod:`ddtrack.scenario_suite`): the statistics of a set of runs with their intervals, the
+"""What every ``ddtrack bench`` leaderboard shares (the suites' :mod:`.suite`, :mod:`.robot_board` and
+the user's own scenarios' :mod:`.scenario_suite`): the statistics of a set of runs with their intervals, the
 plausibility flags, the flat table's interval columns, and the files a board is written to."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import pyarrow as pa
 import pyarrow.csv
 import pyarrow.parquet as pq
 
-from .metrics import METRIC_DOMAINS, mean_ci, rate_ci
-from .outdir import atomic_write
+from ..metrics import METRIC_DOMAINS, mean_ci, rate_ci
+from ..outdir import atomic_write
 
 #: the per-run statistics a leaderboard gives a mean and a 95 % interval of
 STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "effort", "saturation_fraction")

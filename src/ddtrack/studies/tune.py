@@ -29,12 +29,12 @@ import jax.numpy as jnp
 import numpy as np
 import tomli_w
 
-from .errors import ConfigError
-from .metrics import window_mask
-from .outdir import atomic_write
-from .runner import prepare_batch
-from .scenario import Scenario, Setup, controller_output, tunable_kinds
-from .sim import Draws, simulate_batch
+from ..errors import ConfigError
+from ..metrics import window_mask
+from ..outdir import atomic_write
+from ..runner import prepare_batch
+from ..scenario import Scenario, Setup, controller_output, tunable_kinds
+from ..sim import Draws, simulate_batch
 
 #: the fields of the outer law that the tuned gains replace, in the scenario's ``gains`` order; the kinds whose
 #: gains can be tuned are the registry's (:func:`ddtrack.scenario.tunable_kinds`: differentiable, Kanayama, torque)

@@ -13,13 +13,13 @@ import pyarrow as pa
 import pyarrow.csv
 import pyarrow.parquet as pq
 
-from ._format import significant, with_interval
+from .._format import significant, with_interval
+from ..errors import ConfigError
+from ..metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
+from ..outdir import atomic_write
+from ..scenario import Scenario, load_scenario
+from .batches import monte_carlo
 from .board import lost, tracking_value
-from .errors import ConfigError
-from .metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
-from .outdir import atomic_write
-from .runner import monte_carlo
-from .scenario import Scenario, load_scenario
 
 STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
 
@@ -54,7 +54,7 @@ def run_specs(
     chunk_size: int = 64,
     on_chunk: Callable[[str, int], None] = lambda name, done: None,
 ) -> dict[str, list[dict]]:
-    """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.runner.monte_carlo`)."""
+    """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.studies.batches.monte_carlo`)."""
     seeds = list(range(seed, seed + n))
     return {
         name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=partial(on_chunk, name))

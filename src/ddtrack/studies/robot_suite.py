@@ -21,14 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import ConfigError
+from ..feasibility import stable_boundary_layer
+from ..robots import PRESETS
+from ..scenario import controller_kind, controller_kinds, tracking_kinds
+from ..scenario.files import apply_override, validate_scenario
 from .board import write_board
-from .errors import ConfigError
-from .feasibility import stable_boundary_layer
+from .cells import SUITE_TASK
 from .robot_board import board_markdown, board_table, figure, summarize
-from .robots import PRESETS
-from .scenario import controller_kind, controller_kinds, tracking_kinds
-from .scenario.files import apply_override, validate_scenario
-from .studies.cells import SUITE_TASK
 from .sweep import Configuration, Plan, canonical, read_records, run_key, run_sweep
 
 

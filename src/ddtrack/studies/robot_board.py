@@ -1,4 +1,4 @@
-"""The leaderboard of ``ddtrack bench --suite robots`` (:mod:`ddtrack.robot_suite`), from its runs' records: per
+"""The leaderboard of ``ddtrack bench --suite robots`` (:mod:`ddtrack.studies.robot_suite`), from its runs' records: per
 robot, each controller's mean tracking error per condition with a 95 % interval over seeds, its failures, the runs
 that lost the path (counted apart, never averaged in) and the runs that asked for more than the robot has; whether
 the paper robot's ranking survives on the others (Kendall's tau); and the NN-adaptive law's paired improvement over
@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ._format import interval_text, significant
+from .._format import interval_text, significant
+from ..metrics import METRIC_DOMAINS, mean_ci, pooled_improvement, rate_ci
 from .board import IMPLAUSIBLE, interval_columns, lost, tracking_value, warning_codes
-from .metrics import METRIC_DOMAINS, mean_ci, pooled_improvement, rate_ci
 
 
 def rows(records: dict[str, dict]) -> list[dict]:

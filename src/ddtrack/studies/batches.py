@@ -1,0 +1,164 @@
+"""Batches kept as metrics only, and Monte Carlo over seeds.
+
+The batched program records only the series the metrics read (XLA drops the rest: states, references, controls),
+each run's metrics are computed from them as :func:`ddtrack.runner.run_metrics` computes a single run's, and
+:func:`monte_carlo` runs one scenario over seeds in chunks of one shape.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from ..controllers import Controller
+from ..layout import BODY, POSTURE_ERROR
+from ..metrics import tracking_error
+from ..model import MeasurementNoise, Plant, WheelDisturbance
+from ..model.sensed import ODOMETRY_ERROR
+from ..plausibility import traction_columns
+from ..runner import batch_runs, loading_warnings, prepare_batch, run_metrics, timing
+from ..scenario import Scenario, Setup
+from ..sim import STATUS_NAMES, Draws, simulate_batch
+from ..sim.batch import in_shares
+from ..trajectories import Trajectory
+from ..trajectories.switched import TrajectoryFrame
+
+#: the series metrics and warnings read
+METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", "slip_r", "slip_l", "slip_lateral",
+               *ODOMETRY_ERROR.names)  # fmt: skip
+#: a slip plant's wheel spin speeds, at which the motor's curve is checked (:func:`traction_columns`)
+WHEEL_SPINS = ("phidot_r", "phidot_l")
+
+
+@partial(jax.jit, static_argnames=("n_steps", "substeps"))
+def _metric_series(
+    plant: Plant,
+    controller: Controller,
+    trajectory: Trajectory,
+    x0: Array,
+    draws: Draws,
+    disturbance: WheelDisturbance,
+    noise: MeasurementNoise,
+    divergence_error: Array,
+    **steps: int,
+) -> tuple[dict, Array, Array]:
+    """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
+    recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md).
+    ``divergence_error`` holds each run's bound [m], so runs of different scenarios can share the batch."""
+    result = simulate_batch(
+        plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error=divergence_error, **steps
+    )
+    series = {
+        "e_xy": POSTURE_ERROR.span(result.error, "e_x", "e_y"),  # e_tr in NumPy on the host, as timeseries does
+        "v": BODY.read(result.state, "v"),
+        "omega": BODY.read(result.state, "omega"),
+    }  # for the grip the run needed
+    series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
+    series |= {name: value for name, value in result.plant_state.items() if name in WHEEL_SPINS}
+    return series, result.status, result.failure_index
+
+
+def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs`, or several scenarios' runs of one
+    structure joined along the run axis) with the timing of ``scenario``, split over the devices
+    (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays."""
+    series = partial(_metric_series, n_steps=scenario.simulation.n_steps, **timing(scenario))
+    return jax.tree_util.tree_map(np.asarray, in_shares(series, *runs, divergence_error))
+
+
+def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
+    """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
+    runs = batch_runs(setup, draws)
+    bounds = np.full(len(np.asarray(setup.x0)), scenario.divergence_distance())
+    return series_metrics(scenario, setup, *metric_series(scenario, runs, bounds))
+
+
+def series_metrics(
+    scenario: Scenario, setup: Setup, series: dict, status: np.ndarray, failure_index: np.ndarray
+) -> list[dict]:
+    """The metrics of each run of a batch from its :func:`metric_series` (the rows of ``setup``'s runs)."""
+    sim = scenario.simulation
+    series = dict(series)
+    e_xy = series.pop("e_xy")
+    series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
+    t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
+    no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
+    nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
+    lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
+    loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
+    metrics = []
+    for i in range(len(status)):
+        k = int(failure_index[i])
+        valid = slice(0, sim.n_steps if k < 0 else k + 1)
+        columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
+        columns = {name: value[valid] for name, value in columns.items()}
+        columns |= traction_columns(
+            jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, scenario
+        )
+        metrics.append(
+            run_metrics(
+                scenario,
+                columns,
+                status=STATUS_NAMES[int(status[i])],
+                failure_time=None if k < 0 else float(t[k]),
+                nmse=None if nmse is None else nmse[i],
+                lost_path_error=lost_path_error,
+                loaded=loaded,
+            )
+        )
+    return metrics
+
+
+def drawn_plant(scenario: Scenario, setup: Setup, i: int) -> dict[str, float]:
+    """``plant_<field>`` of run ``i`` of a prepared batch, for each ``[randomize]`` draw (in its unit)."""
+    drawn = [field for field, draw in scenario.randomize if draw is not None]
+    return {f"plant_{field}": float(getattr(setup.plant_params, field)[i]) for field in drawn}
+
+
+def monte_carlo(
+    scenario: Scenario,
+    seeds: Sequence[int],
+    *,
+    chunk_size: int = 64,
+    on_chunk: Callable[[int], None] = lambda done: None,
+    frame: TrajectoryFrame | None = None,
+) -> list[dict]:
+    """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
+    the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
+
+    The last chunk is padded with repeats of its first seed, so every chunk has one shape and compiles once.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario; its ``[randomize]`` draws differ per seed.
+    seeds : sequence of int
+        One run per seed.
+    chunk_size : int
+        Runs per vmapped batch.
+    on_chunk : callable
+        Called with the number of runs done after each chunk (a progress bar).
+    frame : TrajectoryFrame, optional
+        A study's trajectory kinds (:func:`~ddtrack.trajectories.switched.trajectory_frame`): its cells on
+        different trajectories then share one program.
+
+    Returns
+    -------
+    list of dict
+        Per seed: ``seed``, ``plant_<field>`` for each drawn plant parameter (in its unit), and the
+        :func:`ddtrack.summarize` metrics.
+    """
+    rows: list[dict] = []
+    for start in range(0, len(seeds), chunk_size):
+        chunk = list(seeds[start : start + chunk_size])
+        padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
+        setup, draws = prepare_batch(scenario, padded, frame=frame)
+        for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):
+            rows.append({"seed": seed, **drawn_plant(scenario, setup, i), **metrics})
+        on_chunk(len(rows))
+    return rows
