@@ -81,6 +81,8 @@ def _assert_declared(obj_or_cls: Any, config: Any, what: str) -> None:
     for field in dataclasses.fields(cls):
         if field.name not in config.model_fields or field.default is dataclasses.MISSING or field.name == "kind":
             continue
+        if config.model_fields[field.name].is_required():  # the section has no default that could be repeated
+            continue
         if f"{cls.__name__}.{field.name}" in RESOLVED:
             assert config.model_fields[field.name].default is None
             continue
@@ -110,6 +112,49 @@ def test_robot_trajectory_and_sensing_defaults_are_the_declarations():
     _assert_declared(Sensing, SensingConfig, "[sensing]")
     for runtime, kind in [(Line, "line"), (Circle, "circle"), (FigureEight, "figure_eight"), (Sinusoid, "sinusoid")]:
         _assert_declared(runtime, trajectory_kinds()[kind], kind)
+
+
+def test_disturbance_defaults_are_the_declarations():
+    """The sinusoid's bias and phase default once, for the ``[disturbance]`` section and the runtime torque."""
+    from ddtrack.model import WheelDisturbance
+    from ddtrack.model.disturbance import SinusoidTorque
+    from ddtrack.scenario.sections import SinusoidDisturbance
+
+    assert issubclass(SinusoidDisturbance, SinusoidTorque)
+    _assert_declared(WheelDisturbance, SinusoidDisturbance, "[disturbance] sinusoid")
+    assert declaration(WheelDisturbance, "bias") == (SinusoidTorque, "bias")
+
+
+def test_timing_is_declared_once():
+    """The control period and the substeps default once: the ``[simulation]`` keys, the closed loop, every runtime
+    part that samples time, and the simulator's and the identification run's keyword defaults."""
+    import inspect
+
+    from ddtrack.identification import identify
+    from ddtrack.parameters import TIMING, Timing
+    from ddtrack.scenario import SimulationConfig
+    from ddtrack.sim import simulate
+
+    assert issubclass(SimulationConfig, Timing) and is_structure(SimulationConfig, "substeps")
+    from ddtrack.model.slip import slip_plant_model
+    from ddtrack.model.slip_velocity import slip_velocity_model
+    from ddtrack.sim.simulate import ClosedLoop
+
+    timed = []
+    for cls in _package_dataclasses():  # a slip plant's own `substeps` is its minimum, not the loop's: not here
+        for field in dataclasses.fields(cls):
+            if field.name == "control_period" and field.default is not dataclasses.MISSING:
+                assert declaration(cls, field.name) == (Timing, field.name), f"{cls.__name__}.{field.name}"
+                timed.append(cls.__name__)
+    assert {"WheelPD", "MPPI", "LTVUnicycleLQR", "AdaptiveDynamicCompensator", "Sensing"} <= set(timed), timed
+    assert declaration(ClosedLoop, "substeps") == (Timing, "substeps")
+    for function in (simulate, identify):
+        defaults = inspect.signature(function).parameters
+        assert defaults["control_period"].default == TIMING.control_period == 0.01
+        assert defaults["substeps"].default == TIMING.substeps == 10
+    for factory in (slip_plant_model, slip_velocity_model):
+        defaults = inspect.signature(factory).parameters
+        assert (defaults["period"].default, defaults["substeps"].default) == (TIMING.control_period, TIMING.substeps)
 
 
 def _package_dataclasses() -> list[type]:

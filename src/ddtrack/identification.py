@@ -22,6 +22,7 @@ from .controllers import Backstepping, Cascade, Dithered, Emulator, VelocityOutp
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
 from .model import DynamicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
+from .parameters import TIMING
 from .sim import Draws, simulate
 from .trajectories import SampledTrajectory, unicycle_reference
 
@@ -173,8 +174,8 @@ def identify(
     *,
     duration: float = 60.0,
     epochs: int = 100,
-    control_period: float = 0.01,
-    substeps: int = 10,
+    control_period: float = TIMING.control_period,
+    substeps: int = TIMING.substeps,
     dither: FloatVector = (0.05, 0.1),
     gains: FloatVector = (1.0, 55.0, 15.0),
     limits: FloatVector = (2.0, 4.0),

@@ -23,6 +23,7 @@ T = TypeVar("T")
 Positive = Annotated[float, Field(gt=0.0)]
 NonNegative = Annotated[float, Field(ge=0.0)]
 PositiveTriple = tuple[Positive, Positive, Positive]
+Pair = tuple[float, float]  #: [right, left] per wheel, or any two numbers
 MAX_COORDINATE = 1e6  # [m]: 1000 km; far larger positions and lengths break the plots (ticks of 1e308 m)
 Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Position = tuple[Coordinate, Coordinate]
@@ -47,6 +48,18 @@ class Parameters(BaseModel):
     errors, and a validated section is frozen."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, strict=False)
+
+
+class Timing(Parameters):
+    """When the controller samples and how finely the plant is integrated in between: declared once for the
+    scenario's ``[simulation]`` section, the simulator's closed loop and every part that samples time (each part
+    is handed the scenario's period when it is built; the default is what a part built alone takes)."""
+
+    control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
+    substeps: Structure[int] = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
+
+
+TIMING = Timing()  #: the declared defaults, for a function's keyword defaults
 
 
 def is_structure(model: type[BaseModel], name: str) -> bool:

@@ -14,7 +14,7 @@ from pydantic import Field
 from .._pytree import FloatVector, pytree_dataclass
 from ..layout import velocity
 from ..model import RobotParams, reduced_coriolis, reduced_input_inverse, reduced_mass, wheel_friction, wheel_speeds
-from ..parameters import NonNegative, Parameters, Positive, Structure, declared
+from ..parameters import NonNegative, Parameters, Positive, Structure, Timing, declared
 from ..trajectories import Reference
 from .base import VelocityCommand
 
@@ -101,7 +101,7 @@ class WheelPD:
     nominal: RobotParams
     kp: float = declared(InnerLoopParameters)
     kd: float = declared(InnerLoopParameters)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Array:
         return wheel_speeds(self.nominal, velocity(jnp.asarray(x0)))

@@ -9,8 +9,20 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 from jax import Array
+from pydantic import Field
 
 from .._pytree import FloatVector, pytree_dataclass
+from ..parameters import NonNegative, Pair, Parameters, declared
+
+
+class SinusoidTorque(Parameters):
+    """The deterministic part of a wheel-torque disturbance, per wheel: bias + amplitude sin(frequency t + phase)
+    (model.md §1.4's default), as the scenario's ``[disturbance] kind = "sinusoid"`` declares it."""
+
+    bias: Pair = Field((0.0, 0.0), description="[right, left] constant part [N m].")
+    amplitude: Pair = Field(description="[right, left] amplitude [N m].")
+    frequency: NonNegative = Field(description="Angular frequency [rad/s].")
+    phase: Pair = Field((0.0, 0.0), description="[right, left] phase [rad].")
 
 
 @pytree_dataclass
@@ -31,10 +43,10 @@ class WheelDisturbance:
         (2,) standard deviation of the Gaussian part, held per control period [N m]
     """
 
-    bias: FloatVector = (0.0, 0.0)
-    amplitude: FloatVector = (0.0, 0.0)
-    frequency: float = 0.0
-    phase: FloatVector = (0.0, 0.0)
+    bias: FloatVector = declared(SinusoidTorque)
+    amplitude: FloatVector = (0.0, 0.0)  # the section requires one; zero is the other kinds' "no sinusoid"
+    frequency: float = 0.0  # likewise
+    phase: FloatVector = declared(SinusoidTorque)
     std: FloatVector = (0.0, 0.0)
 
     def torque(self, t: Array, xi: Array) -> Array:

@@ -32,7 +32,7 @@ from pydantic import Field
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4
 from ..layout import BODY, Layout, pose_vector, velocity
-from ..parameters import NonNegative, Parameters, Structure, declared, declared_fields
+from ..parameters import NonNegative, Parameters, Structure, Timing, declared, declared_fields
 from .plants import ODEPlant
 from .sensing import encoder_angle, odometry_step, split_delay
 
@@ -436,7 +436,7 @@ class Sensing:
     measurement_delay: float = declared(SensingParameters)
     encoder_counts: int = declared(SensingParameters)
     odometry: bool = declared(SensingParameters)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
     fix_period: float = declared(SensingParameters)
     fix_gain: float = declared(SensingParameters)
     fix_position_std: float = declared(SensingParameters)

@@ -41,6 +41,7 @@ from jax import Array
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4, rosenbrock2
 from ..layout import WHEEL_TORQUES, Layout, pose_vector, velocity
+from ..parameters import TIMING
 from .dynamics import wheel_friction
 from .motors import DCMotor, drive_torque
 from .params import RobotParams
@@ -300,8 +301,8 @@ def slip_plant_model(
     slip_speed: float = 1e-2,
     caster: float | None = None,
     motor: DCMotor | None = None,
-    period: float = 0.01,
-    substeps: int = 10,
+    period: float = TIMING.control_period,
+    substeps: int = TIMING.substeps,
     scheme: str | None = None,
     pwm_model: DCMotor | None = None,
     com_height: float = 0.0,

@@ -17,6 +17,7 @@ from jax import Array
 from .._pytree import pytree_dataclass, static_field
 from ..integrators import rk4, rosenbrock2
 from ..layout import VELOCITY_COMMAND, Layout, velocity
+from ..parameters import TIMING
 from .dynamics import wheel_speeds
 from .motor_plants import armature_voltage, cruise_integral
 from .motors import VelocityDriver
@@ -120,8 +121,8 @@ def slip_velocity_model(
     friction: float = 0.8,
     slip_speed: float = 1e-2,
     caster: float | None = None,
-    period: float = 0.01,
-    substeps: int = 10,
+    period: float = TIMING.control_period,
+    substeps: int = TIMING.substeps,
     scheme: str | None = None,
     com_height: float = 0.0,
 ) -> Callable[[RobotParams], SlipVelocityPlant]:

@@ -7,11 +7,10 @@ from __future__ import annotations
 import errno
 from pathlib import Path
 
-from ..parameters import MAX_COORDINATE, Coordinate, Length, NonNegative, Parameters, Position, Positive
+from ..parameters import MAX_COORDINATE, Coordinate, Length, NonNegative, Pair, Parameters, Position, Positive
 
 # re-exported: every section's bounded numeric types
-__all__ = ["MAX_COORDINATE", "Coordinate", "Length", "NonNegative", "Position", "Positive"]
-Pair = tuple[float, float]
+__all__ = ["MAX_COORDINATE", "Coordinate", "Length", "NonNegative", "Pair", "Position", "Positive"]
 
 
 class FieldError(ValueError):

@@ -11,7 +11,9 @@ from pydantic import Field, model_validator
 from ..errors import ConfigError, did_you_mean
 from ..layout import BODY
 from ..model import MeasurementNoise, RobotParams, WheelDisturbance
+from ..model.disturbance import SinusoidTorque
 from ..model.params import RobotParameters
+from ..parameters import Timing
 from ._base import (
     MAX_CONTROL_PERIODS,
     MAX_SEED,
@@ -26,12 +28,10 @@ from ._base import (
 # --- [simulation] -------------------------------------------------------------------------------
 
 
-class SimulationConfig(_Section):
+class SimulationConfig(Timing, _Section):  # control_period and substeps: Timing's declarations
     """Timing of the run, its seed, and what its statistics cover."""
 
     duration: Positive = Field(40.0, description="Length of the run [s].")
-    control_period: Positive = Field(0.01, description="Controller sampling period T_c [s].")
-    substeps: int = Field(10, ge=1, le=1000, description="RK4 steps per control period.")
     metric_window: Pair | None = Field(
         None, description="[start, end] of the error statistics [s]; default the whole run."
     )
@@ -346,14 +346,10 @@ class ConstantDisturbance(_Section):
         return WheelDisturbance(bias=self.torque)
 
 
-class SinusoidDisturbance(_Section):
+class SinusoidDisturbance(SinusoidTorque, _Section):  # the keys: SinusoidTorque's declarations
     """bias + amplitude * sin(frequency t + phase), per wheel (model.md §1.4's default)."""
 
     kind: Literal["sinusoid"]
-    bias: Pair = Field((0.0, 0.0), description="[right, left] constant part [N m].")
-    amplitude: Pair = Field(description="[right, left] amplitude [N m].")
-    frequency: NonNegative = Field(description="Angular frequency [rad/s].")
-    phase: Pair = Field((0.0, 0.0), description="[right, left] phase [rad].")
 
     def build(self) -> WheelDisturbance:
         return WheelDisturbance(bias=self.bias, amplitude=self.amplitude, frequency=self.frequency, phase=self.phase)

@@ -9,10 +9,11 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass, static_field
+from .._pytree import pytree_dataclass
 from ..geometry import posture_error
 from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
+from ..parameters import TIMING, Timing, declared
 from ..precision import require_float64
 from ..trajectories import Trajectory
 from .result import SimResult
@@ -130,7 +131,7 @@ class ClosedLoop:
     control_period: Array | float  #: T_c [s]
     divergence_error: Array | float  #: [m]
     divergence_speed: Array | float  #: [m/s] or [rad/s]
-    substeps: int = static_field(default=10, why="a loop bound (not yet traced)")  #: integration steps per period
+    substeps: int = declared(Timing)  #: integration steps per period (a loop bound: structure)
 
     def period(
         self, x: Array, memory: Any, status: Array, k: Array, xi_disturbance: Array, xi_noise: Array
@@ -177,8 +178,8 @@ def simulate(
     draws: Draws,
     *,
     n_steps: int,
-    control_period: float = 0.01,
-    substeps: int = 10,
+    control_period: float = TIMING.control_period,
+    substeps: int = TIMING.substeps,
     disturbance: WheelDisturbance = WheelDisturbance(),
     noise: MeasurementNoise = MeasurementNoise(),
     divergence_error: float = 50.0,

@@ -54,7 +54,7 @@ from pydantic import Field
 from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model import RobotParams, reduced_input_inverse, reduced_mass, wheel_speeds
-from ...parameters import NonNegative, Parameters, Positive, Structure, declared
+from ...parameters import NonNegative, Parameters, Positive, Structure, Timing, declared
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
@@ -122,7 +122,7 @@ class AdaptiveComputedTorque:
     gamma: FloatVector = declared(AdaptiveBacksteppingParameters, "adaptation_gain")
     lower: FloatVector = (5.0, 0.28, 0.0)
     upper: FloatVector = (20.0, 1.12, 0.05)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> Array:
         return jnp.clip(nominal_parameters(self.nominal), jnp.asarray(self.lower), jnp.asarray(self.upper))

@@ -34,7 +34,7 @@ from pydantic import Field
 from ..._pytree import FloatVector, pytree_dataclass
 from ...geometry import error_rates, posture_error
 from ...layout import pose, velocity
-from ...parameters import Parameters, Positive, PositiveTriple, Structure, declared
+from ...parameters import Parameters, Positive, PositiveTriple, Structure, Timing, declared
 from ...trajectories import Reference
 from ..backstepping import VelocityClamps, clamp_command
 from ..base import Logs, VelocityCommand, commanded
@@ -117,7 +117,7 @@ class LTVUnicycleLQR:
 
     q_tolerance: FloatVector = declared(LTVLQRParameters)
     r_tolerance: FloatVector = declared(LTVLQRParameters)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
     min_velocity: float = declared(LTVLQRParameters)
     max_velocity: float = declared(VelocityClamps)
     max_yaw_rate: float = declared(VelocityClamps)

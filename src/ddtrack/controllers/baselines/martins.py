@@ -42,7 +42,7 @@ from pydantic import Field
 from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model.lag import PIONEER_3DX_WITH_LASER
-from ...parameters import NonNegative, Parameters, Positive, Structure, declared
+from ...parameters import NonNegative, Parameters, Positive, Structure, Timing, declared
 from ...trajectories import Reference
 from ..backstepping import Backstepping
 from ..base import Logs, commanded
@@ -140,7 +140,7 @@ class AdaptiveDynamicCompensator:
     adaptation_rate: FloatVector = declared(CompensatorParameters)
     leakage: Array | float = declared(CompensatorParameters)
     theta0: FloatVector = declared(CompensatorParameters)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
     command_rate: str = declared(CompensatorParameters)
     output_kind: ClassVar[str] = "velocity"  #: what it hands the plant
 

@@ -44,7 +44,7 @@ from ...geometry import wrap_angle
 from ...integrators import semi_implicit_euler_step
 from ...layout import pose_vector, velocity
 from ...model import RobotParams, body_acceleration, pose_rate
-from ...parameters import NonNegative, Parameters, Positive, Structure, declared
+from ...parameters import NonNegative, Parameters, Positive, Structure, Timing, declared
 from ...trajectories import Reference, Trajectory
 from ..base import Logs
 
@@ -164,7 +164,7 @@ class MPPI:
     trajectory: Trajectory
     cost: MPPICost = MPPICost()
     model_step: float = declared(MPPIParameters)
-    control_period: float = 0.01
+    control_period: float = declared(Timing)
     temperature: float = declared(MPPIParameters)
     noise_std: FloatVector = declared(MPPIParameters)
     samples: int = declared(MPPIParameters)
