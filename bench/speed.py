@@ -35,7 +35,8 @@ In one process, in this order:
    the machine's load; ``ratio_cold`` / ``ratio_warm`` = cold_cli_s / warm_cli_s over python_process_s
    (targets: <= 6 and <= 3). ``--cli-only`` measures only this.
 9. ``floor_process_s``: the whole process that only imports what ``ddtrack run`` imports (the command line, the
-   scenario models, JAX, Matplotlib's pyplot, pyarrow's Parquet writer), starts JAX's float64 CPU backend and exits
+   scenario models, JAX, SciPy's LAPACK, which JAX loads to call an exported program, Matplotlib's pyplot,
+   pyarrow's Parquet writer), starts JAX's float64 CPU backend and exits
    as ``ddtrack`` does (without the interpreter's teardown): what any ``ddtrack run`` costs before it reads its
    scenario. Interleaved with the three above; ``ratio_floor`` = floor_process_s / python_process_s, the lowest
    ``ratio_warm`` this command could reach with these libraries.
@@ -257,7 +258,8 @@ def ddtrack_command() -> list[str]:
 FLOOR_CODE = (
     "import ddtrack.cli; ddtrack.cli.collect_garbage_rarely(); import ddtrack.scenario, ddtrack.runner, jax; "
     "ddtrack.cli.one_device_per_core(jax); ddtrack.enable_float64(); ddtrack.runner.enable_compilation_cache(); "
-    "jax.numpy.zeros(1).block_until_ready(); import matplotlib.pyplot, pyarrow.parquet; ddtrack.cli.exit_now(0)"
+    "jax.numpy.zeros(1).block_until_ready(); import scipy.linalg, matplotlib.pyplot, pyarrow.parquet; "
+    "ddtrack.cli.exit_now(0)"
 )
 
 

@@ -130,6 +130,7 @@ def test_timing_is_declared_once():
     part that samples time, and the simulator's and the identification run's keyword defaults."""
     import inspect
 
+    from ddtrack.controllers import NNAdaptiveParameters
     from ddtrack.identification import identify
     from ddtrack.parameters import TIMING, Timing
     from ddtrack.scenario import SimulationConfig
@@ -152,6 +153,15 @@ def test_timing_is_declared_once():
         defaults = inspect.signature(function).parameters
         assert defaults["control_period"].default == TIMING.control_period == 0.01
         assert defaults["substeps"].default == TIMING.substeps == 10
+    defaults = inspect.signature(identify).parameters  # and the NN-adaptive law's identification run's own
+    for argument, declared_name in [
+        ("duration", "identification_duration"),
+        ("epochs", "epochs"),
+        ("learning_rate", "learning_rate"),
+        ("momentum", "momentum"),
+        ("clip_norm", "gradient_clip"),
+    ]:
+        assert defaults[argument].default == NNAdaptiveParameters.model_fields[declared_name].default, argument
     for factory in (slip_plant_model, slip_velocity_model):
         defaults = inspect.signature(factory).parameters
         assert (defaults["period"].default, defaults["substeps"].default) == (TIMING.control_period, TIMING.substeps)

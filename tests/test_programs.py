@@ -83,3 +83,87 @@ def test_the_quick_suite_runs_its_cells_as_one_batch_with_each_cells_bits(tmp_pa
                          r["seed"] == row["seed"]]  # fmt: skip
             assert record["metrics"] == finite({k: v for k, v in row.items() if k != "seed"})
 
+
+EXPORTED_RUNS = """
+import hashlib, json, sys
+import jax
+import numpy as np
+import ddtrack
+from ddtrack import compilations, runner
+from ddtrack.studies import batches
+
+ddtrack.enable_float64()
+compilations.enable_compilation_cache()  # in $DDTRACK_CACHE_DIR, as the ddtrack command and a study's workers do
+if sys.argv[1] == "again":  # a later process: the program is read back, never exported again
+    jax.export.export = lambda *args, **kwargs: sys.exit("exported again")
+scenario = ddtrack.load_scenario(sys.argv[2], overrides=sys.argv[3:])
+
+
+def single_run():  # every column of a run as the hash of its bytes (a NaN torque column included)
+    columns = ddtrack.timeseries(ddtrack.run(scenario, seed=1))
+    return {name: hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest() for name, value in columns.items()}
+
+
+rows = {"exported": batches.monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4), "run exported": single_run()}
+batches.exported = runner.exported = lambda *args: None  # the plain jit of the same functions
+jax.clear_caches()
+rows |= {"jit": batches.monte_carlo(scenario, [0, 1, 2, 3], chunk_size=4), "run jit": single_run()}
+print(json.dumps(rows))
+"""
+
+
+@pytest.mark.parametrize("name", ["burger_cmd_vel_figure8", "paper_square"])
+def test_an_exported_program_gives_the_jitted_bits(name, tmp_path):
+    """A study's batch program and a single run's, exported beside the persistent cache (compilations.exported), then
+    read back by a later process instead of traced again, give every metric and every column of the plain jitted
+    programs to the bit: a sensed,
+    motor-driven Burger (whose control period reaches the program as a traced argument, as it does in the jit;
+    as a constant XLA folded it and moved the bits) and the paper's torque-driven square."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from conftest import SCENARIOS
+
+    environment = os.environ | {"DDTRACK_CACHE_DIR": str(tmp_path), "JAX_PLATFORMS": "cpu"}
+    command = [sys.executable, "-c", EXPORTED_RUNS]
+    scenario = [str(SCENARIOS / f"{name}.toml"), *SHORT]
+    outputs = []
+    for stage in ("first", "again"):
+        run = [*command, stage, *scenario]
+        done = subprocess.run(run, env=environment, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        outputs.append(json.loads(done.stdout))
+    assert len(list((tmp_path / "jax" / "ddtrack-exported").glob("*.bin"))) == 2  # the batch's and the run's
+    first, again = outputs
+    assert first["exported"] == first["jit"] == again["exported"] == again["jit"]
+    assert all(row["status"] == "ok" for row in first["jit"])
+    assert first["run exported"] == first["run jit"] == again["run exported"] == again["run jit"]
+    assert len(first["run jit"]) >= 19  # every documented column
+
+
+def test_only_a_structure_its_key_can_name_is_exported():
+    """The key of an exported program names every node's type and static values: a type from outside ddtrack (a
+    plugin's, whose code may change under the same name) or a static value that is not plain data (a function) is
+    never exported, two static values give two keys, and numbers (leaves) give one."""
+    from ddtrack._pytree import pytree_dataclass
+    from ddtrack.compilations import _structure_text
+    from ddtrack.model import MeasurementNoise, WheelDisturbance
+    from ddtrack.sim.simulate import ClosedLoop
+
+    @pytree_dataclass
+    class Plugin:
+        gain: float = 1.0
+
+    def text(value):
+        return _structure_text(jax.tree_util.tree_structure(value))
+
+    def loop(substeps):
+        return ClosedLoop(None, None, None, WheelDisturbance(), MeasurementNoise(), 0.01, 1.0, 1.0, substeps=substeps)
+
+    assert "ClosedLoop" in text(loop(10)) and "WheelDisturbance" in text((loop(10), 1.0))
+    assert text(loop(10)) != text(loop(20))  # a static value: another program
+    assert text(loop(10)) == text(dataclasses.replace(loop(10), control_period=0.05))  # a number: the same one
+    assert text((loop(10), Plugin())) is None and text([{"a": Plugin()}]) is None
+    assert text(loop(len)) is None  # a function as a static value: its name would not say what it does

@@ -6,6 +6,10 @@ at the limit an XLA compile fails to allocate and the process crashes (a segment
 One distinct ddtrack run compiles programs holding about 600 mappings, so a process that runs a few hundred
 distinct configurations (a sweep's worker, a test session) reaches it. :func:`release_compilations` empties JAX's
 caches once a process holds a given share of its limit: later runs of a released program compile it again.
+
+Beside JAX's persistent cache this module also keeps a ledger of the simulation programs studies compiled there
+(:func:`compiled_programs`), and the programs themselves as ``jax.export`` serialized them (:func:`exported`), so a
+later process reads a program back instead of tracing it again.
 """
 
 from __future__ import annotations
@@ -14,11 +18,13 @@ import gc
 import hashlib
 import logging
 import os
+import threading
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 MAP_LIMIT_FILE = "/proc/sys/vm/max_map_count"
 OWN_MAPS_FILE = "/proc/self/maps"
@@ -91,6 +97,93 @@ def record_compiled(programs: Iterable[str]) -> None:
                 ledger.write("".join(f"{entry}\n" for entry in programs))
         except OSError:
             pass  # a read-only cache only loses the count
+
+
+EXPORTS = "ddtrack-exported"  #: beside JAX's cache: programs as jax.export serialized them, one file per key
+_EXPORTED: dict[str, Callable[..., Any] | None] = {}  # this process's: key -> its exported program's jitted call
+_EXPORTING = threading.Lock()  # a batch's shares ask from threads of their own
+
+
+def _plain(value: Any) -> bool:
+    """Whether ``value``'s repr says all of it: None, a bool, int, float or str, or a tuple of them."""
+    if isinstance(value, tuple | list):
+        return all(_plain(item) for item in value)
+    return value is None or isinstance(value, bool | int | float | str)
+
+
+def _structure_text(tree: Any) -> str | None:
+    """A pytree structure as text that names every node's type and static values, or None where the text could
+    hide a difference: a type from outside ddtrack (a plugin's code may change under the same name) or a static
+    value that is not plain data."""
+    node = tree.node_data()
+    if node is None:
+        return "*"
+    kind, static = node
+    module = getattr(kind, "__module__", "")
+    if module not in ("builtins", "collections") and not module.startswith("ddtrack."):
+        return None
+    if not (_plain(static) or static is kind):  # a named tuple's node names its own class
+        return None
+    children = [_structure_text(child) for child in tree.children()]
+    if any(child is None for child in children):
+        return None
+    return f"{module}.{kind.__qualname__}{static!r}({','.join(children)})"  # type: ignore[arg-type]
+
+
+def exported(
+    name: str, function: Callable[..., Any], args: tuple, static: Mapping[str, Any]
+) -> Callable[..., Any] | None:
+    """``function(*args, **static)``'s program (every leaf of ``args`` traced, ``static`` plain values) as a jitted
+    callable of ``args``' leaves, from its ``jax.export`` serialization beside the persistent cache: the first process
+    that needs a structure exports it there, and every later one deserializes it instead of tracing and lowering it
+    again (about 2 s a program, warm). Its compiled form then comes from the persistent cache as before, and its
+    results are the jitted function's to the bit (``tests/test_programs.py``). None where this cannot be kept
+    safely: no persistent cache in this process, no ``flatbuffers``, or a structure with a type from outside ddtrack
+    or a static value that is not plain data (its key could not tell two programs apart)."""
+    import jax
+
+    folder = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # read(), refused for this flag
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    structure = _structure_text(tree)
+    if not folder or structure is None or not all(_plain(value) for value in static.values()):
+        return None
+    avals = [jax.typeof(leaf) for leaf in leaves]
+    shapes = ";".join(f"{aval.dtype}{list(aval.shape)}{'w' if aval.weak_type else ''}" for aval in avals)
+    key = ledger_entry(f"{name} {jax.default_backend()} {structure} {shapes} {sorted(static.items())!r}")
+    with _EXPORTING:
+        if key not in _EXPORTED:
+            program = _exported_program(Path(folder) / EXPORTS / f"{key}.bin", function, tree, avals, static)
+            if program is not None:
+                program.__name__ = program.__qualname__ = name  # "jit(name)" in JAX's logs, as the jitted function's
+            _EXPORTED[key] = None if program is None else jax.jit(program)  # a failure is not tried again
+    return _EXPORTED[key]
+
+
+def _exported_program(
+    path: Path, function: Callable[..., Any], tree: Any, avals: list, static: Mapping[str, Any]
+) -> Callable[..., Any] | None:
+    """The call of the program at ``path``, exported there first if absent or unreadable (written whole: a
+    temporary file renamed); None where JAX cannot export it (no ``flatbuffers``; a host callback in the program)."""
+    import jax
+
+    try:
+        program = jax.export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # absent, or cut short by a full disk: exported again
+        try:
+            flat = lambda *leaves: function(*jax.tree_util.tree_unflatten(tree, leaves), **static)  # noqa: E731
+            specs = [jax.ShapeDtypeStruct(aval.shape, aval.dtype, weak_type=aval.weak_type) for aval in avals]
+            program = jax.export.export(jax.jit(flat))(*specs)
+            serialized = program.serialize()
+        except Exception:  # the plain jit then runs it, as before
+            return None
+        try:
+            path.parent.mkdir(exist_ok=True)
+            temporary = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}")
+            temporary.write_bytes(serialized)
+            os.replace(temporary, path)
+        except OSError:
+            pass  # a read-only cache: exported again next time
+    return lambda *leaves: program.call(*leaves)
 
 
 def padded_length(n: int) -> int:

@@ -18,7 +18,7 @@ from jax import Array
 
 from ._ordered import total
 from ._pytree import FloatVector
-from .controllers import Backstepping, Cascade, Dithered, Emulator, VelocityOutput
+from .controllers import Backstepping, Cascade, Dithered, Emulator, NNAdaptiveParameters, VelocityOutput
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
 from .model import DynamicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
@@ -165,6 +165,10 @@ def prediction_nmse(emulator: Emulator, z: Array, targets: Array) -> Array:
 
 # one compiled program: run op by op, its glue (the exciting reference, the draws, the samples) was some 90 small
 # programs, each traced and looked up on its own (0.5 s of a warm NN-adaptive `ddtrack run`, docs/benchmarks.md)
+#: the NN-adaptive law's declared defaults: identify's keyword defaults are the scenario's
+_NN = {name: field.default for name, field in NNAdaptiveParameters.model_fields.items()}
+
+
 @partial(jax.jit, static_argnames=("duration", "epochs", "control_period", "substeps", "reference_scale"))
 def identify(
     plant: RobotParams | Plant,
@@ -172,16 +176,16 @@ def identify(
     emulator: Emulator,
     key: Array,
     *,
-    duration: float = 60.0,
-    epochs: int = 100,
+    duration: float = _NN["identification_duration"],
+    epochs: int = _NN["epochs"],
     control_period: float = TIMING.control_period,
     substeps: int = TIMING.substeps,
     dither: FloatVector = (0.05, 0.1),
     gains: FloatVector = (1.0, 55.0, 15.0),
     limits: FloatVector = (2.0, 4.0),
-    learning_rate: float = 0.2,
-    momentum: float = 0.3,
-    clip_norm: float = 5.0,
+    learning_rate: float = _NN["learning_rate"],
+    momentum: float = _NN["momentum"],
+    clip_norm: float = _NN["gradient_clip"],
     disturbance: WheelDisturbance = WheelDisturbance(),
     noise: MeasurementNoise = MeasurementNoise(),
     reference_scale: tuple[float, float] = (1.0, 1.0),

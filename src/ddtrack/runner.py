@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from functools import partial
+from typing import Any
 
 import jax
 import numpy as np
@@ -20,7 +21,7 @@ from jax import Array
 from . import feasibility
 from .adaptation import adaptation_warnings
 from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
-from .compilations import padded_length
+from .compilations import exported, padded_length
 from .controllers import Emulator, TorqueLaw
 from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
@@ -262,9 +263,22 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
     runs = batch_runs(setup, draws)
+    options = run_options(scenario)
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
-        return simulate_batch(*runs, **run_options(scenario))
-    return simulate_alone(*runs, **run_options(scenario))  # as a batch's row, bit for bit
+        return simulate_batch(*runs, **options)
+    static = {name: options[name] for name in ("n_steps", "substeps")}
+    numbers = (*runs, options["control_period"], options["divergence_error"])  # traced, as the jit traces them
+    program = exported("simulate_alone", _alone_positional, numbers, static)
+    if program is None:
+        return simulate_alone(*runs, **options)  # as a batch's row, bit for bit
+    return program(*jax.tree_util.tree_leaves(numbers))  # the same program, read back instead of traced
+
+
+def _alone_positional(*args: Any, **static: int) -> SimResult:
+    """:func:`~ddtrack.sim.simulate_alone` with the control period and the divergence bound as its last positional
+    arguments (an exported program's arguments are positional)."""
+    *runs, control_period, divergence_error = args
+    return simulate_alone(*runs, control_period=control_period, divergence_error=divergence_error, **static)
 
 
 def run_options(scenario: Scenario) -> dict:

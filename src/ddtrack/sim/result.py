@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import jax
 import numpy as np
 from jax import Array
 
@@ -95,6 +96,10 @@ class SimResult(NamedTuple):
         """When the run failed [s], or None for a run that did not."""
         k = int(self.failure_index)
         return None if k < 0 else float(self.t[k])
+
+
+# an exported program (ddtrack.compilations.exported) returns one: its output structure must be serializable
+jax.export.register_namedtuple_serialization(SimResult, serialized_name="ddtrack.SimResult")
 
 
 def timeseries(result: SimResult) -> dict[str, np.ndarray]:

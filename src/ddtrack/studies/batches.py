@@ -9,19 +9,21 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from functools import partial
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..compilations import exported
 from ..controllers import Controller
 from ..layout import BODY, POSTURE_ERROR
 from ..metrics import tracking_error
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..model.sensed import ODOMETRY_ERROR
 from ..plausibility import traction_columns
-from ..runner import batch_runs, loading_warnings, prepare_batch, run_metrics, timing
+from ..runner import batch_runs, loading_warnings, prepare_batch, run_metrics
 from ..scenario import Scenario, Setup
 from ..sim import STATUS_NAMES, Draws, simulate_batch
 from ..sim.batch import in_shares
@@ -67,8 +69,22 @@ def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray)
     """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs`, or several scenarios' runs of one
     structure joined along the run axis) with the timing of ``scenario``, split over the devices
     (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays."""
-    series = partial(_metric_series, n_steps=scenario.simulation.n_steps, **timing(scenario))
+    sim = scenario.simulation
+    static = {"n_steps": sim.n_steps, "substeps": sim.substeps}
+
+    def series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
+        program = exported("_metric_series", _period_last, (*share, sim.control_period), static)
+        if program is None:
+            return _metric_series(*share, control_period=sim.control_period, **static)
+        return program(*jax.tree_util.tree_leaves((*share, sim.control_period)))
+
     return jax.tree_util.tree_map(np.asarray, in_shares(series, *runs, divergence_error))
+
+
+def _period_last(*args: Any, **static: int) -> tuple[dict, Array, Array]:
+    """:func:`_metric_series` with the control period as its last positional argument (an exported program's
+    arguments are positional)."""
+    return _metric_series(*args[:-1], control_period=args[-1], **static)
 
 
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:

@@ -23,6 +23,9 @@ class Reference(NamedTuple):
     omega_dot: Array  #: d omega_r/dt [rad/s^2]
 
 
+jax.export.register_namedtuple_serialization(Reference, serialized_name="ddtrack.Reference")  # in a SimResult
+
+
 class Trajectory(Protocol):
     """A time-parametrised reference: a pure function ``t [s] -> Reference``."""
 
