@@ -186,7 +186,7 @@ def test_runs_split_over_two_cpu_devices_are_the_same_runs():
         "record = lambda f, *a: split.append(getattr(f, 'func', f).__name__) or split_runs(f, *a)\n"
         "runner.in_shares = batches.in_shares = record\n"
         "print(json.dumps(monte_carlo(nn, [0, 1, 2, 3], chunk_size=4)))\n"
-        "assert split == ['batched', '_metric_series'], split\n"  # the identification (vmap_runs), the simulation
+        "assert split == ['batched', 'share_series'], split\n"  # the identification (vmap_runs), the simulation
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

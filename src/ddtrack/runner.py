@@ -292,7 +292,7 @@ def run_options(scenario: Scenario) -> dict:
 
 
 def timing(scenario: Scenario) -> dict:
-    """The control period and the substeps a simulation of ``scenario`` takes (static arguments)."""
+    """The control period [s] (a traced number) and the substeps (a static loop bound) of ``scenario``'s simulations."""
     sim = scenario.simulation
     return {"control_period": sim.control_period, "substeps": sim.substeps}
 
@@ -371,5 +371,6 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
 
 
 def batch_runs(setup: Setup, draws: Draws) -> tuple:
-    """The arguments of a prepared batch's simulation, in :func:`_metric_series`'s order (without the bound)."""
+    """The arguments of a prepared batch's simulation, in order (plant, controller, trajectory, x0, draws, disturbance,
+    noise): without the divergence bound, the timing and the run length."""
     return (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)

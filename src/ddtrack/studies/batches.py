@@ -72,13 +72,13 @@ def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray)
     sim = scenario.simulation
     static = {"n_steps": sim.n_steps, "substeps": sim.substeps}
 
-    def series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
+    def share_series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
         program = exported("_metric_series", _period_last, (*share, sim.control_period), static)
         if program is None:
             return _metric_series(*share, control_period=sim.control_period, **static)
         return program(*jax.tree_util.tree_leaves((*share, sim.control_period)))
 
-    return jax.tree_util.tree_map(np.asarray, in_shares(series, *runs, divergence_error))
+    return jax.tree_util.tree_map(np.asarray, in_shares(share_series, *runs, divergence_error))
 
 
 def _period_last(*args: Any, **static: int) -> tuple[dict, Array, Array]:
