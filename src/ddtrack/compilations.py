@@ -130,20 +130,34 @@ def _structure_text(tree: Any) -> str | None:
     return f"{module}.{kind.__qualname__}{static!r}({','.join(children)})"  # type: ignore[arg-type]
 
 
+def call_exported(
+    name: str, function: Callable[..., Any], args: tuple, numbers: Mapping[str, Any], static: Mapping[str, Any]
+) -> Any:
+    """``function(*args, **numbers, **static)`` (``function`` jitted, ``static`` its static arguments), run from its
+    exported program where :func:`exported` has one, else by ``function`` itself: the same bits either way."""
+    import jax
+
+    program = exported(name, function, (args, dict(numbers)), static)
+    if program is None:
+        return function(*args, **numbers, **static)
+    return program(*jax.tree_util.tree_leaves((args, dict(numbers))))
+
+
 def exported(
-    name: str, function: Callable[..., Any], args: tuple, static: Mapping[str, Any]
+    name: str, function: Callable[..., Any], traced: tuple, static: Mapping[str, Any]
 ) -> Callable[..., Any] | None:
-    """``function(*args, **static)``'s program (every leaf of ``args`` traced, ``static`` plain values) as a jitted
-    callable of ``args``' leaves, from its ``jax.export`` serialization beside the persistent cache: the first process
-    that needs a structure exports it there, and every later one deserializes it instead of tracing and lowering it
-    again (about 2 s a program, warm). Its compiled form then comes from the persistent cache as before, and its
-    results are the jitted function's to the bit (``tests/test_programs.py``). None where this cannot be kept
-    safely: no persistent cache in this process, no ``flatbuffers``, or a structure with a type from outside ddtrack
-    or a static value that is not plain data (its key could not tell two programs apart)."""
+    """The program of ``function(*args, **numbers, **static)``, ``traced`` = (args, numbers) (every leaf traced,
+    ``static`` plain values), as a jitted callable of ``traced``'s leaves, from its ``jax.export`` serialization
+    beside the persistent cache: the first process that needs a structure exports it there, and every later one
+    deserializes it instead of tracing and lowering it again (about 2 s a program, warm). Its compiled form then
+    comes from the persistent cache as before, and its results are the jitted function's to the bit
+    (``tests/test_programs.py``). None where this cannot be kept safely: no persistent cache in this process, no
+    ``flatbuffers``, or a structure with a type from outside ddtrack or a static value that is not plain data (its
+    key could not tell two programs apart)."""
     import jax
 
     folder = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # read(), refused for this flag
-    leaves, tree = jax.tree_util.tree_flatten(args)
+    leaves, tree = jax.tree_util.tree_flatten(traced)
     structure = _structure_text(tree)
     if not folder or structure is None or not all(_plain(value) for value in static.values()):
         return None
@@ -170,7 +184,11 @@ def _exported_program(
         program = jax.export.deserialize(bytearray(path.read_bytes()))
     except Exception:  # absent, or cut short by a full disk: exported again
         try:
-            flat = lambda *leaves: function(*jax.tree_util.tree_unflatten(tree, leaves), **static)  # noqa: E731
+
+            def flat(*leaves: Any) -> Any:
+                args, numbers = jax.tree_util.tree_unflatten(tree, leaves)
+                return function(*args, **numbers, **static)
+
             specs = [jax.ShapeDtypeStruct(aval.shape, aval.dtype, weak_type=aval.weak_type) for aval in avals]
             program = jax.export.export(jax.jit(flat))(*specs)
             serialized = program.serialize()

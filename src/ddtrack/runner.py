@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any
 
 import jax
 import numpy as np
@@ -20,8 +19,8 @@ from jax import Array
 
 from . import feasibility
 from .adaptation import adaptation_warnings
+from .compilations import call_exported, padded_length
 from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
-from .compilations import exported, padded_length
 from .controllers import Emulator, TorqueLaw
 from .identification import Identification, identify
 from .layout import BODY, WHEEL_TORQUES
@@ -266,19 +265,8 @@ def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool =
     options = run_options(scenario)
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
         return simulate_batch(*runs, **options)
-    static = {name: options[name] for name in ("n_steps", "substeps")}
-    numbers = (*runs, options["control_period"], options["divergence_error"])  # traced, as the jit traces them
-    program = exported("simulate_alone", _alone_positional, numbers, static)
-    if program is None:
-        return simulate_alone(*runs, **options)  # as a batch's row, bit for bit
-    return program(*jax.tree_util.tree_leaves(numbers))  # the same program, read back instead of traced
-
-
-def _alone_positional(*args: Any, **static: int) -> SimResult:
-    """:func:`~ddtrack.sim.simulate_alone` with the control period and the divergence bound as its last positional
-    arguments (an exported program's arguments are positional)."""
-    *runs, control_period, divergence_error = args
-    return simulate_alone(*runs, control_period=control_period, divergence_error=divergence_error, **static)
+    static = {name: options.pop(name) for name in ("n_steps", "substeps")}  # the rest are traced numbers
+    return call_exported("simulate_alone", simulate_alone, runs, options, static)  # as a batch's row, bit for bit
 
 
 def run_options(scenario: Scenario) -> dict:

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ..compilations import exported
+from ..compilations import call_exported
 from ..controllers import Controller
 from ..layout import BODY, POSTURE_ERROR
 from ..metrics import tracking_error
@@ -73,18 +73,9 @@ def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray)
     static = {"n_steps": sim.n_steps, "substeps": sim.substeps}
 
     def share_series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
-        program = exported("_metric_series", _period_last, (*share, sim.control_period), static)
-        if program is None:
-            return _metric_series(*share, control_period=sim.control_period, **static)
-        return program(*jax.tree_util.tree_leaves((*share, sim.control_period)))
+        return call_exported("_metric_series", _metric_series, share, {"control_period": sim.control_period}, static)
 
     return jax.tree_util.tree_map(np.asarray, in_shares(share_series, *runs, divergence_error))
-
-
-def _period_last(*args: Any, **static: int) -> tuple[dict, Array, Array]:
-    """:func:`_metric_series` with the control period as its last positional argument (an exported program's
-    arguments are positional)."""
-    return _metric_series(*args[:-1], control_period=args[-1], **static)
 
 
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
