@@ -80,3 +80,40 @@ def test_the_sampled_reference_is_the_reference_at_each_period(name):
     for got, want in zip(jax.tree_util.tree_leaves(sampled), jax.tree_util.tree_leaves(expected), strict=True):
         assert got.shape == times.shape
         np.testing.assert_allclose(got, np.asarray(want), rtol=0, atol=1e-12)
+
+
+LOAD_TWICE = """
+import json, sys
+import ddtrack
+from ddtrack import compilations, feasibility
+
+ddtrack.enable_float64()
+compilations.enable_compilation_cache()  # in $DDTRACK_CACHE_DIR, as the ddtrack command does
+with compilations.counting_programs() as lowered:
+    scenario = ddtrack.load_scenario(sys.argv[1])
+    facts = feasibility.reference_facts(scenario)
+sampled = feasibility.sample_reference(scenario)
+print(json.dumps({"lowered": sum(lowered.values()), "facts": facts._asdict(), "peak": float(max(abs(sampled.v)))}))
+"""
+
+
+def test_a_scenario_loaded_before_is_validated_without_compiling(tmp_path):
+    """Loading samples the reference once (a JAX program); its facts are then kept beside the persistent cache, so
+    a later process validates the same scenario without tracing, lowering or running anything, and reads the same
+    numbers to the bit."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    environment = os.environ | {"DDTRACK_CACHE_DIR": str(tmp_path), "JAX_PLATFORMS": "cpu"}
+    outputs = []
+    for _ in range(2):
+        command = [sys.executable, "-c", LOAD_TWICE, str(SCENARIOS / "figure_eight.toml")]
+        done = subprocess.run(command, env=environment, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-3000:]
+        outputs.append(json.loads(done.stdout))
+    first, again = outputs
+    assert first["lowered"] >= 1 and again["lowered"] == 0
+    assert first["facts"] == again["facts"] and first["facts"]["peak_speed"] == first["peak"]
+    assert len(list((tmp_path / "jax" / "ddtrack-references").glob("*.json"))) == 1

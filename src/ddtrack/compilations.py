@@ -194,14 +194,20 @@ def _exported_program(
             serialized = program.serialize()
         except Exception:  # the plain jit then runs it, as before
             return None
-        try:
-            path.parent.mkdir(exist_ok=True)
-            temporary = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}")
-            temporary.write_bytes(serialized)
-            os.replace(temporary, path)
-        except OSError:
-            pass  # a read-only cache: exported again next time
+        keep(path, serialized)
     return lambda *leaves: program.call(*leaves)
+
+
+def keep(path: Path, data: bytes | bytearray) -> None:
+    """Write ``data`` whole to ``path`` beside the persistent cache (a temporary file renamed, so a concurrent
+    reader never sees half of it); a read-only or full cache only loses the file, which is made again next time."""
+    try:
+        path.parent.mkdir(exist_ok=True)
+        temporary = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}")
+        temporary.write_bytes(data)
+        os.replace(temporary, path)
+    except OSError:
+        pass
 
 
 def padded_length(n: int) -> int:

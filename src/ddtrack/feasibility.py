@@ -12,14 +12,16 @@ makes chatter), and what loading the trajectory changed (repeated waypoints drop
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from functools import cache
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from .compilations import padded_length
+from .compilations import keep, ledger_entry, padded_length
 from .errors import ConfigError
 from .precision import require_float64
 
@@ -30,7 +32,18 @@ MAX_SAMPLES = 20_001
 GYRATION_RANGE = (0.05, 20.0)
 
 
-_SAMPLES: dict[tuple, Any] = {}  # the last few scenarios' samples: loading checks them, runs reuse them
+_FACTS: dict[str, ReferenceFacts] = {}  # this process's: loading checks them, a run's bounds read them again
+FACTS = "ddtrack-references"  #: beside JAX's cache: each reference's facts, one small JSON file per key
+
+
+class ReferenceFacts(NamedTuple):
+    """What loading needs to know of a reference, from its samples every control period over the run."""
+
+    peak_speed: float  #: largest |v_r| [m/s]
+    peak_yaw_rate: float  #: largest |omega_r| [rad/s]
+    start: tuple[float, float]  #: (x_r, y_r) at t = 0 [m]
+    extent: float  #: the farthest the reference goes from its start [m]
+    width: float  #: the larger side of the samples' bounding box [m]
 
 
 @cache  # one jitted function: a new one per scenario compiled again each time (its cache is its own)
@@ -42,43 +55,72 @@ def _sampler() -> Callable[..., Any]:  # (trajectory, times) -> Reference; this 
 
 def sample_reference(scenario: Any) -> Any:
     """The scenario's reference every control period over the run (at most 20,001 samples), as NumPy arrays."""
-    require_float64()  # loading samples the reference in JAX
+    require_float64()  # the reference is sampled in JAX
     import jax
 
     sim = scenario.simulation
-    key = (scenario.trajectory.model_dump_json(), sim.duration, sim.control_period)
-    if key not in _SAMPLES:
-        samples = min(MAX_SAMPLES, int(sim.duration / sim.control_period) + 1)
-        times = np.linspace(0.0, sim.duration, samples)
-        padded = np.concatenate([times, np.full(padded_length(samples) - samples, sim.duration)])
-        reference = _sampler()(scenario.trajectory.build(), padded)  # each sample is its own time's alone
-        if len(_SAMPLES) >= 8:
-            _SAMPLES.pop(next(iter(_SAMPLES)))
-        _SAMPLES[key] = jax.tree_util.tree_map(lambda column: np.asarray(column)[:samples], reference)
-    return _SAMPLES[key]
+    samples = min(MAX_SAMPLES, int(sim.duration / sim.control_period) + 1)
+    times = np.linspace(0.0, sim.duration, samples)
+    padded = np.concatenate([times, np.full(padded_length(samples) - samples, sim.duration)])
+    reference = _sampler()(scenario.trajectory.build(), padded)  # each sample is its own time's alone
+    return jax.tree_util.tree_map(lambda column: np.asarray(column)[:samples], reference)
+
+
+def reference_facts(scenario: Any) -> ReferenceFacts:
+    """The :class:`ReferenceFacts` of ``scenario``'s reference. Kept beside the persistent compilation cache where
+    this process has it on (the ``ddtrack`` command does), keyed by the trajectory's every value, the run's duration
+    and control period, and this package's source and JAX's version: loading a scenario whose reference was seen
+    before then compiles and runs nothing (issue: validation compiled the sampler, 0.1 to 0.3 s a scenario)."""
+    import jax
+
+    sim = scenario.simulation
+    key = ledger_entry(f"reference {scenario.trajectory.model_dump_json()} {sim.duration!r} {sim.control_period!r}")
+    if key in _FACTS:
+        return _FACTS[key]
+    folder = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # read(), refused for this flag
+    path = Path(folder) / FACTS / f"{key}.json" if folder else None
+    try:
+        facts = ReferenceFacts(**json.loads(path.read_text())) if path else None
+    except (OSError, ValueError, TypeError):  # absent, cut short or of an older layout: sampled again
+        facts = None
+    if facts is None:
+        reference = sample_reference(scenario)
+        x, y = reference.x, reference.y
+        facts = ReferenceFacts(
+            peak_speed=float(np.max(np.abs(reference.v))),
+            peak_yaw_rate=float(np.max(np.abs(reference.omega))),
+            start=(float(x[0]), float(y[0])),
+            extent=float(np.max(np.hypot(x - x[0], y - y[0]))),
+            width=float(max(np.ptp(x), np.ptp(y))),
+        )
+        if path:
+            keep(path, json.dumps(facts._asdict()).encode())
+    facts = facts._replace(start=(facts.start[0], facts.start[1]))  # JSON gives a list
+    if len(_FACTS) >= 64:
+        _FACTS.pop(next(iter(_FACTS)))
+    _FACTS[key] = facts
+    return facts
 
 
 def reference_peaks(scenario: Any) -> tuple[float, float]:
     """Largest |v_r| [m/s] and |omega_r| [rad/s] of the scenario's reference, sampled every control period."""
-    reference = sample_reference(scenario)
-    return float(np.max(np.abs(reference.v))), float(np.max(np.abs(reference.omega)))
+    facts = reference_facts(scenario)
+    return facts.peak_speed, facts.peak_yaw_rate
 
 
 def divergence_bound(scenario: Any) -> float:
     """The tracking error [m] beyond which a run has diverged, scaled with the scenario: 3 (e_0 + extent + 2 L),
     e_0 the initial distance to the reference, extent the farthest the reference goes from its start, L the half
     axle. A fixed 50 m let a Burger on a 0.5 m circle wander 50 m before it counted as lost."""
-    reference = sample_reference(scenario)
-    start = scenario.initial.pose if scenario.initial.pose is not None else (reference.x[0], reference.y[0])
-    initial = math.hypot(start[0] - reference.x[0], start[1] - reference.y[0])
-    extent = float(np.max(np.hypot(reference.x - reference.x[0], reference.y - reference.y[0])))
-    return 3.0 * (initial + extent + 2.0 * scenario.plant_params().half_axle)
+    facts = reference_facts(scenario)
+    start = scenario.initial.pose if scenario.initial.pose is not None else facts.start
+    initial = math.hypot(start[0] - facts.start[0], start[1] - facts.start[1])
+    return 3.0 * (initial + facts.extent + 2.0 * scenario.plant_params().half_axle)
 
 
 def reference_width(scenario: Any) -> float:
     """The larger side [m] of the bounding box of the reference's samples."""
-    reference = sample_reference(scenario)
-    return float(max(np.ptp(reference.x), np.ptp(reference.y)))
+    return reference_facts(scenario).width
 
 
 def _speed_field(scenario: Any) -> str:
