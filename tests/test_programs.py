@@ -9,6 +9,7 @@ import dataclasses
 
 import jax
 import pytest
+from conftest import SCENARIOS
 from distributed import Client, LocalCluster
 
 from ddtrack.compilations import counting_programs
@@ -124,8 +125,6 @@ def test_an_exported_program_gives_the_jitted_bits(name, tmp_path):
     import subprocess
     import sys
 
-    from conftest import SCENARIOS
-
     environment = os.environ | {"DDTRACK_CACHE_DIR": str(tmp_path), "JAX_PLATFORMS": "cpu"}
     command = [sys.executable, "-c", EXPORTED_RUNS]
     scenario = [str(SCENARIOS / f"{name}.toml"), *SHORT]
@@ -167,3 +166,54 @@ def test_only_a_structure_its_key_can_name_is_exported():
     assert text(loop(10)) == text(dataclasses.replace(loop(10), control_period=0.05))  # a number: the same one
     assert text((loop(10), Plugin())) is None and text([{"a": Plugin()}]) is None
     assert text(loop(len)) is None  # a function as a static value: its name would not say what it does
+
+
+def test_mc_and_reproduce_say_the_programs_they_compile(tmp_path, monkeypatch):
+    """``mc`` and ``reproduce`` say first how many simulation programs they need (as ``sweep`` and ``bench`` do):
+    the number they then lower. ``mc``: one per controller (every chunk has one size); ``reproduce``: one per variant
+    and case, the paper's line and square being different trajectories."""
+    import ddtrack
+    import ddtrack.studies.reproduce as reproduce_module
+    from ddtrack.studies.mc import run_specs
+
+    specs = {
+        name: ddtrack.load_scenario(SCENARIOS / "paper_line.toml", overrides=SHORT, controller=name)
+        for name in ("backstepping", "ltv_lqr")
+    }
+    said = []
+    jax.clear_caches()
+    with counting_programs() as counts:
+        rows = run_specs(specs, n=3, chunk_size=2, on_programs=lambda needed, held: said.append((needed, held)))
+    assert said == [(2, 0)] and counts[SIMULATION] == 2  # two controllers; three seeds in two chunks of two
+    assert [len(runs) for runs in rows.values()] == [3, 3]
+
+    variants = {"backstepping": ["controller.kind=backstepping", *SHORT], "nn_adaptive": [*reproduce_module.NN, *SHORT]}
+    variants["nn_adaptive"] += ["controller.epochs=1", "controller.identification_duration=1"]
+    monkeypatch.setattr(reproduce_module, "VARIANTS", variants)
+    said.clear()
+    jax.clear_caches()
+    with counting_programs() as counts:
+        reproduce_module.reproduce(tmp_path, seeds=1, on_programs=lambda needed, held: said.append((needed, held)))
+    assert said == [(4, 0)] and counts["jit(simulate_batch)"] == 4
+
+
+def test_a_second_mc_finds_its_programs_in_the_cache(tmp_path):
+    """The ``ddtrack mc`` command's first line counts the programs the persistent cache holds, by the ledger its
+    first run wrote: none, then both."""
+    import os
+    import subprocess
+    import sys
+
+    environment = os.environ | {"DDTRACK_CACHE_DIR": str(tmp_path / "cache"), "JAX_PLATFORMS": "cpu"}
+    command = [sys.executable, "-m", "ddtrack", "mc", str(SCENARIOS / "paper_line.toml"), "-n", "2", "--overwrite"]
+    command += ["--controllers", "backstepping,ltv_lqr", "--out", str(tmp_path / "mc")]
+    command += [argument for override in SHORT for argument in ("--set", override)]
+    lines = []
+    for _ in range(2):
+        done = subprocess.run(command, env=environment, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        lines.append(done.stderr.splitlines()[0])
+    assert lines == [
+        "2 simulation programs to run (one per structure); 0 already compiled in the cache",
+        "2 simulation programs to run (one per structure); 2 already compiled in the cache",
+    ]

@@ -305,16 +305,17 @@ def progress_bar(total: int, label: str) -> Iterator[Callable[..., None]]:
         yield advance
 
 
+def say_programs(needed: int, held: int) -> None:
+    """A study's first line, on stderr: the simulation programs its runs need and how many the cache holds."""
+    plural = "program" if needed == 1 else "programs"
+    click.echo(
+        f"{needed} simulation {plural} to run (one per structure); {held} already compiled in the cache", err=True
+    )
+
+
 def study_progress(advance: Callable[..., None]) -> dict[str, Callable[[int, int], None]]:
-    """What a study (``run_sweep``, the bench suites) reports as it goes: first, on stderr, the simulation programs its
-    runs need and how many the cache already holds; then the runs done, on ``advance``'s progress bar."""
-
-    def say_programs(needed: int, held: int) -> None:
-        plural = "program" if needed == 1 else "programs"
-        click.echo(
-            f"{needed} simulation {plural} to run (one per structure); {held} already compiled in the cache", err=True
-        )
-
+    """What a study (``run_sweep``, the bench suites) reports as it goes: first :func:`say_programs`; then the runs
+    done, on ``advance``'s progress bar."""
     return {"on_record": lambda done, total: advance(done, total=total), "on_programs": say_programs}
 
 

@@ -9,7 +9,7 @@ import click
 
 from ..cluster import check_cluster_options, cluster_options, dask_client
 from ..errors import ConfigError
-from . import cli, enable_compilation_cache, overwrite_option, progress_bar, study_progress
+from . import cli, enable_compilation_cache, overwrite_option, progress_bar, say_programs, study_progress
 
 
 @cli.command(short_help="The paper's Table 1 and Figs. 10-17, over seeds, with intervals.")
@@ -46,7 +46,7 @@ def reproduce(out: Path, seeds: int, ablations: bool, overwrite: bool) -> int:
     from ..studies.reproduce import reproduce as run_reproduce
 
     with staged_folder(out, command="reproduce") as stage:
-        table = run_reproduce(stage, seeds=seeds, ablations=ablations)
+        table = run_reproduce(stage, seeds=seeds, ablations=ablations, on_programs=say_programs)
     click.echo(table_markdown(table))
     click.echo(f"wrote {out}/table1.md, table1.csv, table1.json and figures/ in {table['elapsed_s']:.0f} s")
     losing = [name for name, wins in nn_beats_backstepping(table).items() if not wins]
@@ -122,6 +122,7 @@ def mc(
             seed=seed,
             chunk_size=chunk,
             on_chunk=lambda name, done: advance(names.index(name) * n + done, name),
+            on_programs=say_programs,
         )
     summary = summarise(rows)
     with staged_folder(out, command="mc") as stage:

@@ -13,7 +13,7 @@ its start how many programs it needs and how many the cache already holds.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import jax
@@ -58,10 +58,17 @@ def task_size(runs: int, most: int) -> int:
     return even if even <= max(most, 2) else size
 
 
-def programs_held(keys: Sequence[str], sizes: Sequence[int]) -> int:
-    """How many of the programs (``keys[i]`` at batch size ``sizes[i]``) the persistent cache holds, by its ledger."""
+def batch_program(key: str, size: int, *, whole: bool = False) -> str:
+    """The ledger's name of the program of ``key``'s runs in batches of ``size``: the metrics program
+    (:func:`.batches.metric_series`), or with ``whole`` the one that records every series
+    (:func:`ddtrack.runner.run_setup`)."""
+    return f"{key} size={size}" + (" whole" if whole else "")
+
+
+def programs_held(programs: Collection[str]) -> int:
+    """How many of the distinct ``programs`` (:func:`batch_program`) the persistent cache holds, by its ledger."""
     compiled = compiled_programs()
-    return sum(ledger_entry(f"{key} size={size}") in compiled for key, size in zip(keys, sizes, strict=True))
+    return sum(ledger_entry(program) in compiled for program in set(programs))
 
 
 def _rows(tree: Any, rows: slice) -> Any:
@@ -92,7 +99,7 @@ def cells_rows(cells: Sequence[tuple[Prepared, Sequence[int]]], size: int) -> li
             used = len(part_bound)
             part, part_bound = _padded(part, size), _padded(part_bound, size)
             outputs.append(_rows(metric_series(cells[members[0]][0][0], part, part_bound), slice(0, used)))
-        record_compiled([ledger_entry(f"{key} size={size}")])
+        record_compiled([ledger_entry(batch_program(key, size))])
         series = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *outputs)
         start = 0
         for i in members:

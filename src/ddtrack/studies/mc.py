@@ -14,12 +14,14 @@ import pyarrow.csv
 import pyarrow.parquet as pq
 
 from .._format import significant, with_interval
+from ..compilations import ledger_entry, record_compiled
 from ..errors import ConfigError
 from ..metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
 from ..outdir import atomic_write
 from ..scenario import Scenario, load_scenario
 from .batches import monte_carlo
 from .board import lost, tracking_value
+from .cells import batch_program, planned_key, programs_held
 
 STATISTICS = ("e_tr_mean", "e_tr_rms", "e_tr_max", "e_tr_final", "settling_time", "effort", "saturation_fraction")
 
@@ -53,13 +55,20 @@ def run_specs(
     seed: int = 0,
     chunk_size: int = 64,
     on_chunk: Callable[[str, int], None] = lambda name, done: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> dict[str, list[dict]]:
-    """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.studies.batches.monte_carlo`)."""
+    """Per controller, one row per seed ``seed .. seed + n - 1`` (see :func:`ddtrack.studies.batches.monte_carlo`).
+    ``on_programs(needed, held)`` hears first how many simulation programs the controllers need (one per structure:
+    every chunk has one size) and how many the persistent compilation cache holds."""
     seeds = list(range(seed, seed + n))
-    return {
-        name: monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=partial(on_chunk, name))
-        for name, spec in specs.items()
-    }
+    size = min(chunk_size, n)
+    programs = {name: batch_program(planned_key(spec, None), size) for name, spec in specs.items()}
+    on_programs(len(set(programs.values())), programs_held(programs.values()))
+    rows = {}
+    for name, spec in specs.items():
+        rows[name] = monte_carlo(spec, seeds, chunk_size=chunk_size, on_chunk=partial(on_chunk, name))
+        record_compiled([ledger_entry(programs[name])])
+    return rows
 
 
 def summarise(rows: dict[str, list[dict]]) -> dict:

@@ -21,6 +21,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 
 from .._format import with_interval
+from ..compilations import ledger_entry, record_compiled
 from ..metrics import METRIC_DOMAINS, improvement, mean_ci, summarize
 from ..outdir import atomic_write
 from ..plotting import ADAPTIVE, plot_errors, plot_gains, plot_path, plot_states
@@ -28,6 +29,7 @@ from ..runner import prepare_batch, row, run_setup
 from ..scenario import Scenario, load_scenario
 from ..shipped import scenario_path
 from ..sim import timeseries
+from .cells import batch_program, planned_key, program_key, programs_held
 
 #: The paper's Table 1: mean tracking error [m] and improvement [%] (its 52.04 % rounds to 52.05).
 PAPER_TABLE = {
@@ -60,19 +62,30 @@ class CaseResult:
     series: dict[str, dict] = field(default_factory=dict)
 
 
+def case_scenarios(name: str, variants: dict[str, list[str]]) -> dict[str, Scenario]:
+    """The shipped scenario ``name`` once per variant, with the variant's overrides."""
+    path = scenario_path(name)
+    return {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
+
+
 def run_case(
-    name: str, seeds: int, variants: dict[str, list[str]], progress: Callable[[str], None] = lambda _: None
+    name: str,
+    seeds: int,
+    variants: dict[str, list[str]],
+    progress: Callable[[str], None] = lambda _: None,
+    scenarios: dict[str, Scenario] | None = None,
 ) -> CaseResult:
     """Run every variant of one case for seeds 0..seeds-1, each variant as one batch over the seeds (a row of a batch
-    below 16 runs is its single run, bit for bit: ``ddtrack.runner.run_batch``, docs/reliability.md)."""
-    path = scenario_path(name)
-    scenarios = {variant: load_scenario(path, overrides=overrides) for variant, overrides in variants.items()}
+    below 16 runs is its single run, bit for bit: ``ddtrack.runner.run_batch``, docs/reliability.md); ``scenarios``:
+    the variants' scenarios where :func:`case_scenarios` has loaded them already."""
+    scenarios = scenarios or case_scenarios(name, variants)
     result = CaseResult(scenario=scenarios["backstepping"])
     identification = None  # shared by the variants that identify (the same plants, seeds and emulator inits)
     for variant, scenario in scenarios.items():
         setup, draws = prepare_batch(scenario, range(seeds), identification=identification)
         identification = setup.identification if setup.identification is not None else identification
         runs = run_setup(scenario, setup, draws, batched=True)
+        record_compiled([ledger_entry(batch_program(program_key(scenario, setup, draws), seeds, whole=True))])
         sim = scenario.simulation
         for seed in range(seeds):
             run = row(runs, seed)
@@ -210,12 +223,22 @@ def case_figures(name: str, case: CaseResult) -> dict[str, plt.Figure]:
 
 
 def reproduce(
-    out: Path, *, seeds: int = 5, ablations: bool = False, progress: Callable[[str], None] = lambda _: None
+    out: Path,
+    *,
+    seeds: int = 5,
+    ablations: bool = False,
+    progress: Callable[[str], None] = lambda _: None,
+    on_programs: Callable[[int, int], None] = lambda needed, held: None,
 ) -> dict:
-    """Run both cases, write ``table1.{md,csv,json}`` and ``figures/`` into ``out``; return the table."""
+    """Run both cases, write ``table1.{md,csv,json}`` and ``figures/`` into ``out``; return the table.
+    ``on_programs(needed, held)`` hears first how many simulation programs the cases' variants need (one per
+    structure) and how many the persistent compilation cache holds."""
     start = time.perf_counter()
     variants = VARIANTS | (ABLATIONS if ablations else {})
-    cases = {name: run_case(name, seeds, variants, progress) for name in CASES}
+    scenarios = {name: case_scenarios(name, variants) for name in CASES}
+    programs = {batch_program(planned_key(s, None), seeds, whole=True) for c in scenarios.values() for s in c.values()}
+    on_programs(len(programs), programs_held(programs))
+    cases = {name: run_case(name, seeds, variants, progress, scenarios[name]) for name in CASES}
     table = {
         "seeds": seeds,
         "ablations": ablations,

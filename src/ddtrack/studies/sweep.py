@@ -35,7 +35,7 @@ from ..metrics import warning_counts
 from ..outdir import atomic_write
 from ..scenario import FieldError, Scenario, load_scenario, read_toml, to_toml_dict
 from ..trajectories.switched import TrajectoryFrame, trajectory_frame
-from .cells import cache_on_every_worker, programs_held
+from .cells import batch_program, cache_on_every_worker, programs_held
 from .tasks import ERROR, error_record, error_records, plan_tasks, planned_keys, run_cells
 
 RECORDS = "records"
@@ -396,8 +396,8 @@ def run_sweep(
     indices = sorted(missing)
     keys = planned_keys(client, plan.configurations, indices, frame)
     tasks = plan_tasks(plan.configurations, plan.chunk, missing, keys)
-    structures = {key: size for _, size, key in tasks}  # one program each: every task of a structure is one size
-    on_programs(len(structures), programs_held(list(structures), list(structures.values())))
+    programs = {batch_program(key, size) for _, size, key in tasks}  # one each: a structure's tasks are one size
+    on_programs(len(programs), programs_held(programs))
     futures = {}
     for task, size, _ in tasks:
         future = client.submit(run_cells, task, size, frame, pure=False)
