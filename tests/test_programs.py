@@ -217,3 +217,27 @@ def test_a_second_mc_finds_its_programs_in_the_cache(tmp_path):
         "2 simulation programs to run (one per structure); 0 already compiled in the cache",
         "2 simulation programs to run (one per structure); 2 already compiled in the cache",
     ]
+
+
+def test_switches_are_selects_in_one_program():
+    """A circle's direction and backstepping's strict cross term are numbers of the program (selects), not its
+    structure: the four cells that combine them share one key and one batched call, and each cell's rows are the
+    bits of its own batch."""
+    import ddtrack
+    from ddtrack.runner import prepare_batch
+    from ddtrack.studies.cells import cells_rows, program_key
+
+    cells = []
+    for clockwise in ("false", "true"):
+        for strict in ("false", "true"):
+            overrides = (*SHORT, f"trajectory.clockwise={clockwise}", f"controller.strict={strict}")
+            scenario = ddtrack.load_scenario(SCENARIOS / "circle.toml", overrides=overrides)
+            cells.append(((scenario, *prepare_batch(scenario, [0, 1])), [0, 1]))
+    assert len({program_key(*prepared) for prepared, _ in cells}) == 1
+    jax.clear_caches()
+    with counting_programs() as counts:
+        rows = cells_rows(cells, 8)
+    assert counts[SIMULATION] == 1
+    alone = [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
+    assert rows == alone
+    assert len({row["e_tr_mean"] for cell in rows for row in cell[:1]}) == 4  # each switch changes the run

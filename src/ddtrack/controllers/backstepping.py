@@ -12,7 +12,7 @@ from pydantic import Field
 from .._pytree import pytree_dataclass
 from ..geometry import error_rates, posture_error
 from ..layout import POSTURE_ERROR, pose, velocity
-from ..parameters import Parameters, Positive, Structure, declared
+from ..parameters import Parameters, Positive, declared
 from ..trajectories import Reference
 from .base import Logs, VelocityCommand, commanded
 
@@ -54,14 +54,14 @@ def clamp_command(nu_c: Array, nu_c_dot: Array, limits: Array) -> tuple[Array, A
 
 
 def velocity_command(
-    error: Array, nu: Array, ref: Reference, gains: Array, limits: Array, strict: bool
+    error: Array, nu: Array, ref: Reference, gains: Array, limits: Array, strict: Array | bool
 ) -> VelocityCommand:
     """The Kanayama command for ``gains``, its analytic rate, the clamps, and (``strict``) the cross term
     [e_x, sin(e_th)/Ky] for the inner loop: what every Kanayama-based outer law hands the inner loop."""
     nu_c, nu_c_dot, saturated = clamp_command(
         kanayama_command(error, ref, gains), kanayama_command_rate(error, nu, ref, gains), limits
     )
-    feedback = jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]) if strict else jnp.zeros(2)
+    feedback = jnp.where(strict, jnp.stack([error[0], jnp.sin(error[2]) / gains[1]]), 0.0)  # a select: a number
     return VelocityCommand(nu_c, nu_c_dot, feedback, saturated)
 
 
@@ -89,7 +89,7 @@ class VelocityClamps(Parameters):
 class StrictTerm(Parameters):
     """Whether the inner loop adds the strict-backstepping cross term (model.md §2.4, not in the paper)."""
 
-    strict: Structure[bool] = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term (computed torque only).")
 
 
 @pytree_dataclass
@@ -108,7 +108,7 @@ class Backstepping:
     ktheta: Array | float = KANAYAMA_GAINS[2]
     max_velocity: Array | float = declared(VelocityClamps)
     max_yaw_rate: Array | float = declared(VelocityClamps)
-    strict: bool = declared(StrictTerm)
+    strict: Array | bool = declared(StrictTerm)
     output_kind: ClassVar[str] = "velocity"  #: as a whole controller (``step``): what it hands the plant
 
     @property

@@ -70,7 +70,7 @@ class NNAdaptiveParameters(Parameters):
     momentum: Fraction = Field(0.3, description="Emulator momentum beta.")
     gradient_clip: Positive = Field(5.0, description="Emulator gradient-norm clip.")
     online_learning: Structure[bool] = Field(True, description="Train the emulator on every new sample.")
-    learn_saturated: Structure[bool] = Field(
+    learn_saturated: bool = Field(
         False,
         description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
     )
@@ -236,9 +236,9 @@ class NNAdaptiveBackstepping:
     jacobian: str = declared(NNAdaptiveParameters)
     error_jacobian: str = declared(NNAdaptiveParameters)
     online_learning: bool = declared(NNAdaptiveParameters)
-    learn_saturated: bool = declared(NNAdaptiveParameters)
+    learn_saturated: Array | bool = declared(NNAdaptiveParameters)
     structured_jacobian: bool = declared(NNAdaptiveParameters)
-    strict: bool = declared(StrictTerm)
+    strict: Array | bool = declared(StrictTerm)
     nominal_period: Any = None  #: ddtrack.sim.NominalPeriod, for the "model" Jacobians
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> AdaptiveMemory:
@@ -281,7 +281,7 @@ class NNAdaptiveBackstepping:
         nu = velocity(y)
         scales, started = self.emulator.scales, memory.started > 0.5
         # a saturated transition says nothing about the command's effect (the actuators ignored it)
-        learn = started if self.learn_saturated else started & (memory.previous_saturated < 0.5)
+        learn = started & jnp.logical_or(self.learn_saturated, memory.previous_saturated < 0.5)
 
         # learn the last transition
         z_prev = memory.previous_input / scales.inputs

@@ -10,7 +10,7 @@ from jax import Array
 from pydantic import Field
 
 from .._pytree import FloatVector, pytree_dataclass
-from ..parameters import MAX_COORDINATE, Length, Parameters, Position, Positive, Structure, declared
+from ..parameters import MAX_COORDINATE, Length, Parameters, Position, Positive, declared
 from .base import ParametricCurve
 
 
@@ -29,7 +29,7 @@ class CircleParameters(Parameters):
     radius: Length = Field(2.0, description="Radius [m].")
     speed: Positive = Field(0.5, description="v_r [m/s].")
     start_angle: float = Field(-math.pi / 2, description="Polar angle of the start point about the centre [rad].")
-    clockwise: Structure[bool] = Field(False, description="Direction of travel.")
+    clockwise: bool = Field(False, description="Direction of travel.")
 
 
 class FigureEightParameters(Parameters):
@@ -75,10 +75,10 @@ class Circle(ParametricCurve):
     radius: float = declared(CircleParameters)
     speed: float = declared(CircleParameters)
     start_angle: float = declared(CircleParameters)
-    clockwise: bool = declared(CircleParameters)
+    clockwise: Array | bool = declared(CircleParameters)
 
     def position(self, t: Array) -> Array:
-        direction = -1.0 if self.clockwise else 1.0
+        direction = jnp.where(self.clockwise, -1.0, 1.0)
         phi = self.start_angle + direction * self.speed * t / self.radius
         return jnp.asarray(self.center) + self.radius * jnp.stack([jnp.cos(phi), jnp.sin(phi)])
 

@@ -54,7 +54,7 @@ from pydantic import Field
 from ..._pytree import FloatVector, pytree_dataclass
 from ...layout import velocity
 from ...model import RobotParams, reduced_input_inverse, reduced_mass, wheel_speeds
-from ...parameters import NonNegative, Parameters, Positive, Structure, Timing, declared
+from ...parameters import NonNegative, Parameters, Positive, Timing, declared
 from ...trajectories import Reference
 from ..base import Logs, VelocityCommand
 
@@ -102,7 +102,7 @@ class AdaptiveBacksteppingParameters(Parameters):
             "Upper projection bound of the b_w estimate (the lower is 0), at least the [robot] value [N m s/rad]."
         ),
     )
-    strict: Structure[bool] = Field(False, description="Add the strict-backstepping cross term to the torque law.")
+    strict: bool = Field(False, description="Add the strict-backstepping cross term to the torque law.")
 
 
 @pytree_dataclass

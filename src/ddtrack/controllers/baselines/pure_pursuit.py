@@ -142,9 +142,7 @@ class PurePursuitParameters(Parameters):
         description=("Slow down in proportion to the distance to where the reference comes to rest, within this [m]."),
     )
     min_approach_speed: NonNegative = Field(0.05, description="Floor of the approach slow-down [m/s].")
-    rotate_to_heading: Structure[bool] = Field(
-        True, description="Rotate in place while the carrot is far off the heading."
-    )
+    rotate_to_heading: bool = Field(True, description="Rotate in place while the carrot is far off the heading.")
     rotate_min_angle: Annotated[float, Field(gt=0.0, le=math.pi)] = Field(
         0.785, description=("Bearing of the carrot beyond which the robot rotates in place [rad].")
     )
@@ -188,7 +186,7 @@ class RegulatedPurePursuit:
     max_yaw_rate: float = declared(PurePursuitParameters)
     search_horizon: float = declared(PurePursuitParameters)
     search_samples: int = declared(PurePursuitParameters)
-    rotate_to_heading: bool = declared(PurePursuitParameters)
+    rotate_to_heading: Array | bool = declared(PurePursuitParameters)
 
     def init(self, x0: Array, ref0: Reference, key: Array) -> tuple[()]:
         return ()
@@ -218,7 +216,7 @@ class RegulatedPurePursuit:
         yaw_limited = v * jnp.abs(kappa) > self.max_yaw_rate
         v = jnp.where(yaw_limited, self.max_yaw_rate / jnp.maximum(jnp.abs(kappa), 1e-300), v)
         omega = v * kappa
-        rotating = (jnp.abs(bearing) > self.rotate_min_angle) if self.rotate_to_heading else jnp.asarray(False)
+        rotating = jnp.logical_and(self.rotate_to_heading, jnp.abs(bearing) > self.rotate_min_angle)
         v = jnp.where(rotating, 0.0, v)
         omega = jnp.where(rotating, jnp.sign(bearing) * self.rotate_yaw_rate, omega)
         saturated = ((paced > self.max_velocity) | yaw_limited) & ~rotating
