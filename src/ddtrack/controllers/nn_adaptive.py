@@ -74,9 +74,7 @@ class NNAdaptiveParameters(Parameters):
         False,
         description=("Also train the emulator online on transitions during which a clamp or the torque limit acted."),
     )
-    structured_jacobian: Structure[bool] = Field(
-        False, description="Keep only the two direct, positive Jacobian entries."
-    )
+    structured_jacobian: bool = Field(False, description="Keep only the two direct, positive Jacobian entries.")
     identification: Structure[bool] = Field(True, description="Pre-train the emulator on an identification run.")
     identification_duration: Structure[Positive] = Field(
         60.0, le=3600.0, description="Length of the identification run [s]."
@@ -237,7 +235,7 @@ class NNAdaptiveBackstepping:
     error_jacobian: str = declared(NNAdaptiveParameters)
     online_learning: bool = declared(NNAdaptiveParameters)
     learn_saturated: Array | bool = declared(NNAdaptiveParameters)
-    structured_jacobian: bool = declared(NNAdaptiveParameters)
+    structured_jacobian: Array | bool = declared(NNAdaptiveParameters)
     strict: Array | bool = declared(StrictTerm)
     nominal_period: Any = None  #: ddtrack.sim.NominalPeriod, for the "model" Jacobians
 
@@ -270,9 +268,9 @@ class NNAdaptiveBackstepping:
             return self.nominal_period.jacobian(nu, nu_c, held) / c_v
         emulator = Emulator(mlp, self.emulator.scales, self.emulator.uses_velocity)
         jb = input_jacobian(mlp, emulator.scales, emulator.inputs(nu_c, nu))[:, :2] / c_v
-        if self.structured_jacobian:  # keep the two direct channels, positive (model.md §3.7 safeguards)
-            jb = jnp.array([[jnp.maximum(jb[0, 0], 0.0), 0.0], [0.0, 0.0], [0.0, jnp.maximum(jb[2, 1], 0.0)]])
-        return jb
+        # structured: keep the two direct channels, positive (model.md §3.7 safeguards)
+        structured = jnp.array([[jnp.maximum(jb[0, 0], 0.0), 0.0], [0.0, 0.0], [0.0, jnp.maximum(jb[2, 1], 0.0)]])
+        return jnp.where(self.structured_jacobian, structured, jb)
 
     def command(
         self, t: Array, y: Array, ref: Reference, memory: AdaptiveMemory
