@@ -241,3 +241,29 @@ def test_switches_are_selects_in_one_program():
     alone = [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
     assert rows == alone
     assert len({row["e_tr_mean"] for cell in rows for row in cell[:1]}) == 4  # each switch changes the run
+
+
+def test_sensing_delays_and_fix_periods_are_numbers_of_one_program():
+    """The measurement delay (an index into a line padded to 16 readings, as the actuation delay's queue) and the
+    absolute fix's period (the modulus of its schedule) are traced: cells with delays of 1 and 3 periods and fixes
+    every 10 and 25 periods share one program and one batched call, each cell's rows the bits of its own batch.
+    Whether a fix exists at all stays structure (its clock and draws are states)."""
+    import ddtrack
+    from ddtrack.runner import prepare_batch
+    from ddtrack.studies.cells import cells_rows, program_key
+
+    cells = []
+    for delay in (0.01, 0.03):  # circle.toml's control period is 0.01 s
+        for fix in (0.1, 0.25):
+            sensing = (f"sensing.measurement_delay={delay}", "sensing.odometry=true", f"sensing.fix_period={fix}")
+            scenario = ddtrack.load_scenario(SCENARIOS / "circle.toml", overrides=(*SHORT, *sensing))
+            cells.append(((scenario, *prepare_batch(scenario, [0, 1])), [0, 1]))
+    assert len({program_key(*prepared) for prepared, _ in cells}) == 1
+    no_fix = ddtrack.load_scenario(SCENARIOS / "circle.toml", overrides=(*SHORT, "sensing.odometry=true"))
+    assert program_key(no_fix, *prepare_batch(no_fix, [0])) != program_key(*cells[0][0])
+    jax.clear_caches()
+    with counting_programs() as counts:
+        rows = cells_rows(cells, 8)
+    assert counts[SIMULATION] == 1
+    assert rows == [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
+    assert len({row["e_tr_mean"] for cell in rows for row in cell[:1]}) == 4  # each delay and fix changes the run

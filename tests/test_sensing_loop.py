@@ -253,8 +253,8 @@ def test_a_sensed_plant_is_a_plant_with_named_states():
     assert isinstance(plant, SensedPlant) and plant.input_kind == "torque"
     names = plant.state_layout.names
     # the inner state, the wheel angles, the estimate, the command queue (1.5 periods: 2 commands, padded to the
-    # queue's least capacity), the measurement line (2 periods)
-    assert names[:5] == ("x", "y", "theta", "v", "omega") and len(names) == 5 + 2 + 5 + QUEUE_BUCKET * 2 + 2 * 5
+    # queue's least capacity), the measurement line (2 periods: 2 readings, padded to the same least capacity)
+    assert names[:5] == ("x", "y", "theta", "v", "omega") and len(names) == 5 + 2 + 5 + QUEUE_BUCKET * (2 + 5)
     assert plant.recorded_layout.names == names[:12]
     x0 = plant.init(jnp.asarray([1.0, 2.0, 0.5, 0.0, 0.0]))
     assert x0.shape == (len(names),)

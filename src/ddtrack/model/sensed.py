@@ -87,7 +87,10 @@ class SensedPlant:
     queue_capacity
         the commands the queue holds, at least k + (1 if f > 0), padded (:func:`queue_capacity`; static)
     measurement_periods
-        the measurement delay in whole periods (static)
+        the measurement delay in whole periods (a number, traced, as the actuation delay's)
+    reading_capacity
+        the readings the measurement line holds, at least ``measurement_periods``, padded (:func:`queue_capacity`;
+        static)
     encoder_counts
         counts per wheel revolution; 0: the encoders read the exact angle
     odometry
@@ -100,7 +103,10 @@ class SensedPlant:
     noise_key
         the PRNG key the fix's and the gyro's noise are drawn from (per period, folded in by the period's index)
     fix_periods
-        an absolute fix every this many periods; 0: none (static)
+        an absolute fix every this many periods; 0: none (a number, traced)
+    fixes
+        whether the chain has an absolute fix (static: the fix's clock and draws exist or not; set from
+        ``fix_periods`` when it is given as a number)
     gyro
         odometry takes each period's turn from the gyro instead of the encoders (static)
     """
@@ -118,26 +124,41 @@ class SensedPlant:
     gyro_bias: Array | float = 0.0
     noise_key: Array | None = None
     command_periods: Array | np.ndarray | int = 0
-    command_fraction: float = static_field(default=0.0, why="a split period integrates in two pieces (not yet traced)")
+    measurement_periods: Array | np.ndarray | int = 0
+    fix_periods: Array | np.ndarray | int = 0
+    command_fraction: float = static_field(
+        default=0.0, why="a split period integrates in two pieces, its substeps shared in proportion"
+    )
     queue_capacity: int = static_field(default=0, why="the command queue's length, an array shape")
-    measurement_periods: int = static_field(default=0, why="the reading queue's length, an array shape")
+    reading_capacity: int = static_field(default=0, why="the measurement line's length, an array shape")
     odometry: bool = static_field(default=False, why="odometry states exist or not")
-    fix_periods: int = static_field(default=0, why="a fix counter exists or not (not yet traced)")
+    fixes: bool = static_field(default=False, why="a fix's clock and draws exist or not")
     gyro: bool = static_field(default=False, why="a gyro-bias state exists or not")
 
     def __post_init__(self) -> None:
-        """A plant built with a delay and no queue for it gets the least queue that holds it (``queue_capacity`` 0:
-        not given); a queue given too short for the delay is refused. A traced delay has no value to size a queue by:
-        give its ``queue_capacity`` (a traced one without, split by a fraction of a period, is refused)."""
+        """A plant built with a delay and no line for it gets the least line that holds it (a capacity of 0: not
+        given); a line given too short for the delay is refused; a fix period given as a number turns the fix on. A
+        traced delay has no value to size a line by: give its capacity (a traced actuation delay without one, split
+        by a fraction of a period, is refused)."""
         if isinstance(self.command_periods, jax.core.Tracer):
             if self.queue_capacity == 0 and self.command_fraction > 0.0:
                 raise ValueError("a traced actuation delay needs its queue_capacity (see queue_capacity())")
-            return
-        longest = int(np.max(np.asarray(self.command_periods, dtype=int)))
-        if self.queue_capacity == 0:
-            object.__setattr__(self, "queue_capacity", queue_capacity(longest, self.command_fraction))  # frozen
-        elif self.queue_capacity < longest + (1 if self.command_fraction > 0.0 else 0):
-            raise ValueError(f"a queue of {self.queue_capacity} commands cannot hold a delay of {longest} periods")
+        else:
+            longest = int(np.max(np.asarray(self.command_periods, dtype=int)))
+            needed = longest + (1 if self.command_fraction > 0.0 else 0)
+            self._hold("queue_capacity", queue_capacity(longest, self.command_fraction), needed, "commands")
+        if not isinstance(self.measurement_periods, jax.core.Tracer):
+            longest = int(np.max(np.asarray(self.measurement_periods, dtype=int)))
+            self._hold("reading_capacity", queue_capacity(longest, 0.0), longest, "readings")
+        if not isinstance(self.fix_periods, jax.core.Tracer) and np.any(np.asarray(self.fix_periods) > 0):
+            object.__setattr__(self, "fixes", True)  # frozen
+
+    def _hold(self, capacity: str, least: int, needed: int, what: str) -> None:
+        """Give the line ``capacity`` its ``least`` length where it was not given; refuse one too short."""
+        if getattr(self, capacity) == 0:
+            object.__setattr__(self, capacity, least)  # frozen
+        elif getattr(self, capacity) < needed:
+            raise ValueError(f"a line of {getattr(self, capacity)} {what} cannot hold a delay of {needed} periods")
 
     # --- layouts ------------------------------------------------------------------------------------------------
 
@@ -150,7 +171,7 @@ class SensedPlant:
     @property
     def clocked(self) -> bool:
         """The state counts periods (:data:`CLOCK`): the fix's schedule and the fix's and the gyro's draws need it."""
-        return bool(self.fix_periods) or (self.odometry and self.gyro)
+        return self.fixes or (self.odometry and self.gyro)
 
     @property
     def own_angles(self) -> bool:
@@ -165,7 +186,7 @@ class SensedPlant:
             self.inner.state_layout,
             *odometry,
             _queue_layout("queued", self.inner.input_layout, self.queue_length),
-            _queue_layout("delayed", BODY, self.measurement_periods),
+            _queue_layout("delayed", BODY, self.reading_capacity),
             CLOCK if self.clocked else none,
         )
 
@@ -207,7 +228,7 @@ class SensedPlant:
             phi,
             estimate,
             queued.reshape(self.queue_length, len(self.input_layout)),
-            delayed.reshape(self.measurement_periods, len(BODY)),
+            delayed.reshape(self.reading_capacity, len(BODY)),
         )
 
     # --- the plant ----------------------------------------------------------------------------------------------
@@ -221,7 +242,7 @@ class SensedPlant:
         odometry = ([] if self.own_angles else [jnp.zeros(2)]) + [body] if self.odometry else []
         first = body if self.odometry else self.inner.observe(inner)
         queued = jnp.tile(held, self.queue_length)
-        delayed = jnp.tile(first, self.measurement_periods)
+        delayed = jnp.tile(first, self.reading_capacity)
         clock = jnp.zeros(1 if self.clocked else 0)  # periods since the start, for the fix's schedule and the draws
         return jnp.concatenate([inner, *odometry, queued, delayed, clock])
 
@@ -239,8 +260,10 @@ class SensedPlant:
 
     def measure(self, x: Array) -> Array:
         """What the controller's sensors report at x (a BODY vector): the reading of ``measurement_periods`` ago."""
-        delayed = self.split(x)[4]
-        return delayed[0] if self.measurement_periods else self.reading(x)
+        if self.reading_capacity == 0:
+            return self.reading(x)
+        line = jnp.concatenate([self.split(x)[4], self.reading(x)[None]])  # the oldest first, this period's last
+        return line[self.reading_capacity - jnp.asarray(self.measurement_periods)]
 
     def stretches(self, x: Array, u: Array) -> tuple[Array, list[tuple[Array, float]]]:
         """Queue the command ``u`` of this period: (the queue after it, [(command, share of the period), ...]), the
@@ -285,10 +308,10 @@ class SensedPlant:
                 period=period,
                 turn=turn,
             )
-            if self.fix_periods:
+            if self.fixes:
                 estimate = self.fixed(estimate, self.inner.observe(inner_next), x[-1] + 1.0)
             parts += [estimate] if self.own_angles else [phi_next, estimate]
-        if self.measurement_periods:
+        if self.reading_capacity:
             delayed = jnp.concatenate([delayed[1:], self.reading(x)[None]])
         tail = [x[-1:] + 1.0] if self.clocked else []
         return jnp.concatenate([*parts, queued.reshape(-1), delayed.reshape(-1), *tail])
@@ -301,7 +324,7 @@ class SensedPlant:
         noise = jnp.stack([self.fix_position_std * xi[0], self.fix_position_std * xi[1], self.fix_heading_std * xi[2]])
         gap = pose_vector(body) + noise - pose_vector(estimate)
         gap = gap.at[2].set(jnp.arctan2(jnp.sin(gap[2]), jnp.cos(gap[2])))  # the short way round
-        due = jnp.mod(clock, self.fix_periods) == 0
+        due = jnp.mod(clock, jnp.asarray(self.fix_periods)) == 0
         return estimate.at[:3].add(jnp.where(due, self.fix_gain, 0.0) * gap)
 
     def gyro_turn(self, true_turn: Array, period: Array | float, clock: Array) -> Array:
@@ -384,7 +407,7 @@ class SensingParameters(Parameters):
             "control period splits the period between two commands."
         ),
     )
-    measurement_delay: Structure[NonNegative] = Field(
+    measurement_delay: NonNegative = Field(
         0.0,
         le=10.0,
         description=(
@@ -409,7 +432,7 @@ class SensingParameters(Parameters):
         ),
     )
 
-    fix_period: Structure[NonNegative] = Field(
+    fix_period: NonNegative = Field(
         0.0,
         le=3600.0,
         description=(
@@ -476,11 +499,14 @@ class Sensing:
             like_batch(self.gyro_noise_density),
             like_batch(self.gyro_bias),
             key if drawn else None,
-            command_periods=np.broadcast_to(whole, batch),  # numpy: concrete even where the plant is built traced
+            # numpy: concrete even where the plant is built traced
+            command_periods=np.broadcast_to(whole, batch),
+            measurement_periods=np.broadcast_to(measured, batch),
+            fix_periods=np.broadcast_to(fixes, batch),
             command_fraction=fraction,
             queue_capacity=queue_capacity(whole, fraction),  # from the config: a plant built in a trace has no values
-            measurement_periods=measured,
+            reading_capacity=queue_capacity(measured, 0.0),
             odometry=self.odometry,
-            fix_periods=fixes,
+            fixes=bool(fixes),
             gyro=self.gyro,
         )
