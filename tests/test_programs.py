@@ -267,3 +267,35 @@ def test_sensing_delays_and_fix_periods_are_numbers_of_one_program():
     assert counts[SIMULATION] == 1
     assert rows == [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
     assert len({row["e_tr_mean"] for cell in rows for row in cell[:1]}) == 4  # each delay and fix changes the run
+
+
+def test_runs_of_different_lengths_share_a_program_and_keep_their_own_length():
+    """A run is simulated over its length rounded up to a quarter octave (201 and 211 periods both over 216) and cut
+    to its own: two durations share one program and one batched call, each run's rows are the bits of its own batch
+    and its series have its own length; a failure in the periods past the run's end does not count."""
+    import numpy as np
+
+    import ddtrack
+    from ddtrack.compilations import bucketed_length
+    from ddtrack.runner import prepare_batch, run_length, within_run
+    from ddtrack.studies.cells import cells_rows, program_key
+
+    cells = []
+    for duration in (2.0, 2.1):
+        window = (f"simulation.duration={duration}", f"simulation.metric_window=[0.0, {duration}]")
+        scenario = ddtrack.load_scenario(SCENARIOS / "circle.toml", overrides=window)
+        cells.append(((scenario, *prepare_batch(scenario, [0, 1])), [0, 1]))
+    assert [run_length(prepared[0]) for prepared, _ in cells] == [216, 216] == [bucketed_length(n) for n in (201, 211)]
+    assert len({program_key(*prepared) for prepared, _ in cells}) == 1
+    jax.clear_caches()
+    with counting_programs() as counts:
+        rows = cells_rows(cells, 4)
+    assert counts[SIMULATION] == 1
+    assert rows == [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
+    for (scenario, *_), _ in cells:
+        assert len(ddtrack.timeseries(ddtrack.run(scenario))["t"]) == scenario.simulation.n_steps
+
+    run = ddtrack.run(cells[0][0][0])
+    padded = run._replace(status=np.asarray(1), failure_index=np.asarray(210))  # diverged at period 210 of 216
+    assert within_run(padded, 201).status_name == "ok" and within_run(padded, 201).failure_time is None
+    assert within_run(padded._replace(failure_index=np.asarray(150)), 201).status_name == "diverged"

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from functools import partial
+from typing import cast
 
 import jax
 import numpy as np
@@ -19,7 +20,7 @@ from jax import Array
 
 from . import feasibility
 from .adaptation import adaptation_warnings
-from .compilations import call_exported, padded_length
+from .compilations import bucketed_length, call_exported, padded_length
 from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
 from .controllers import Emulator, TorqueLaw
 from .identification import Identification, identify
@@ -260,13 +261,36 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 
 
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
-    """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``)."""
-    runs = batch_runs(setup, draws)
-    options = run_options(scenario)
+    """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``), over its
+    :func:`run_length` and cut to the scenario's periods (:func:`within_run`)."""
+    runs = batch_runs(setup, draws, run_length(scenario))
+    options = run_options(scenario) | {"n_steps": run_length(scenario)}
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
-        return simulate_batch(*runs, **options)
-    static = {name: options.pop(name) for name in ("n_steps", "substeps")}  # the rest are traced numbers
-    return call_exported("simulate_alone", simulate_alone, runs, options, static)  # as a batch's row, bit for bit
+        result = simulate_batch(*runs, **options)
+    else:  # as a batch's row, bit for bit; the rest of the options are traced numbers
+        static = {name: options.pop(name) for name in ("n_steps", "substeps")}
+        result = call_exported("simulate_alone", simulate_alone, runs, options, static)
+    return within_run(result, scenario.simulation.n_steps, batched=batched)
+
+
+def run_length(scenario: Scenario) -> int:
+    """The periods ``scenario``'s runs are simulated for: its own rounded up to a few lengths
+    (:func:`~ddtrack.compilations.bucketed_length`), so that runs of different lengths share one compiled program."""
+    return bucketed_length(scenario.simulation.n_steps)
+
+
+def within_run(result: SimResult, n_steps: int, *, batched: bool = False) -> SimResult:
+    """``result`` (simulated over :func:`run_length` periods) cut to its first ``n_steps``, on the host: a failure in
+    the periods past them (which only froze what came after it) does not count."""
+    within = (slice(None),) * (1 if batched else 0) + (slice(None, n_steps),)
+    timed = {
+        name: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[within], getattr(result, name))
+        for name in result._fields
+        if name not in ("status", "failure_index")
+    }
+    late = np.asarray(result.failure_index) >= n_steps
+    status, failure_index = np.where(late, 0, result.status), np.where(late, -1, result.failure_index)
+    return SimResult(**timed, status=cast(Array, status), failure_index=cast(Array, failure_index))
 
 
 def run_options(scenario: Scenario) -> dict:
@@ -358,7 +382,19 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
     return columns, metrics
 
 
-def batch_runs(setup: Setup, draws: Draws) -> tuple:
-    """The arguments of a prepared batch's simulation, in order (plant, controller, trajectory, x0, draws, disturbance,
-    noise): without the divergence bound, the timing and the run length."""
+def batch_runs(setup: Setup, draws: Draws, length: int | None = None) -> tuple:
+    """The arguments of a prepared run's or batch's simulation, in order (plant, controller, trajectory, x0, draws,
+    disturbance, noise): without the divergence bound, the timing and the run length. ``length``: the draws padded
+    with zeros to that many periods (:func:`run_length`; the periods past the run's own are cut)."""
+    if length is not None:
+        draws = draws._replace(disturbance=_padded(draws.disturbance, length), noise=_padded(draws.noise, length))
     return (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+
+
+def _padded(series: Array, length: int) -> Array:
+    """``series`` (periods along its second-to-last axis) with zero rows appended up to ``length`` periods, on the
+    host (a pad in JAX would compile a program per length; NumPy's array is a JAX argument as it is)."""
+    host = np.asarray(series)
+    missing = length - host.shape[-2]
+    zeros = np.zeros((*host.shape[:-2], missing, host.shape[-1]))
+    return cast(Array, np.concatenate([host, zeros], axis=-2) if missing else host)

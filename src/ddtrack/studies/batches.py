@@ -23,7 +23,7 @@ from ..metrics import tracking_error
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..model.sensed import ODOMETRY_ERROR
 from ..plausibility import traction_columns
-from ..runner import batch_runs, loading_warnings, prepare_batch, run_metrics
+from ..runner import batch_runs, loading_warnings, prepare_batch, run_length, run_metrics
 from ..scenario import Scenario, Setup
 from ..sim import STATUS_NAMES, Draws, simulate_batch
 from ..sim.batch import in_shares
@@ -66,11 +66,12 @@ def _metric_series(
 
 
 def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs`, or several scenarios' runs of one
-    structure joined along the run axis) with the timing of ``scenario``, split over the devices
-    (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays."""
+    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs` padded to the
+    :func:`~ddtrack.runner.run_length` of ``scenario``, or several scenarios' runs of one structure joined along the
+    run axis) with the timing of ``scenario``, split over the devices (:func:`~ddtrack.sim.batch.in_shares`), as NumPy
+    arrays, over the run length: :func:`series_metrics` cuts each run to its scenario's periods."""
     sim = scenario.simulation
-    static = {"n_steps": sim.n_steps, "substeps": sim.substeps}
+    static = {"n_steps": run_length(scenario), "substeps": sim.substeps}  # the runs' series then cut to their own
 
     def share_series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
         return call_exported("_metric_series", _metric_series, share, {"control_period": sim.control_period}, static)
@@ -80,7 +81,7 @@ def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray)
 
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
-    runs = batch_runs(setup, draws)
+    runs = batch_runs(setup, draws, run_length(scenario))
     bounds = np.full(len(np.asarray(setup.x0)), scenario.divergence_distance())
     return series_metrics(scenario, setup, *metric_series(scenario, runs, bounds))
 
@@ -100,7 +101,8 @@ def series_metrics(
     loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
     metrics = []
     for i in range(len(status)):
-        k = int(failure_index[i])
+        k = int(failure_index[i]) if failure_index[i] < sim.n_steps else -1  # a failure past the run's end: none
+        status_i = int(status[i]) if k >= 0 else 0
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
         columns = {name: value[valid] for name, value in columns.items()}
@@ -111,7 +113,7 @@ def series_metrics(
             run_metrics(
                 scenario,
                 columns,
-                status=STATUS_NAMES[int(status[i])],
+                status=STATUS_NAMES[status_i],
                 failure_time=None if k < 0 else float(t[k]),
                 nmse=None if nmse is None else nmse[i],
                 lost_path_error=lost_path_error,

@@ -1,10 +1,11 @@
 """A study's cells batched by structure: the runs of every cell that shares a simulation program, in one call.
 
 A study (a sweep, a ``bench`` suite) has cells that differ in numbers: a robot's mass or grip, a controller's gains,
-its delay, the trajectory it follows in the study's frame. Runs whose simulation program is the same
+its delay, the trajectory it follows in the study's frame, its duration. Runs whose simulation program is the same
 (:func:`program_key`: the pytree structure of plant, controller, trajectory, noise and draws, each leaf's shape and
-type, the run's length, substeps and control period) are joined along the run axis, each with its own divergence
-bound, and simulated in one batched call; each cell's rows then become its metrics under its own scenario
+type, the run's length rounded up to one of a few (:func:`~ddtrack.runner.run_length`), substeps and control period)
+are joined along the run axis, each with its own divergence bound, and simulated in one batched call; each cell's rows
+then become its metrics under its own scenario
 (:func:`~ddtrack.studies.batches.series_metrics`). A ledger beside JAX's persistent compilation cache
 (:func:`ddtrack.compilations.compiled_programs`) records the programs studies compiled into it, so a study says at
 its start how many programs it needs and how many the cache already holds.
@@ -20,7 +21,7 @@ import jax
 import numpy as np
 
 from ..compilations import compiled_programs, ledger_entry, record_compiled
-from ..runner import batch_runs, prepare_batch
+from ..runner import batch_runs, prepare_batch, run_length
 from ..scenario import Scenario, Setup
 from ..sim import Draws
 from ..trajectories.switched import TrajectoryFrame
@@ -37,10 +38,11 @@ def program_key(scenario: Scenario, setup: Setup, draws: Draws) -> str:
     """What the simulation program of a prepared batch's runs depends on, as text: the runs' pytree structure (static
     fields included), each leaf's shape without the run axis and its type, and the run's length, substeps and control
     period (traced, but one value for a whole batch). Equal keys: the runs can share one batched call."""
-    leaves, structure = jax.tree_util.tree_flatten(batch_runs(setup, draws))
+    length = run_length(scenario)
+    leaves, structure = jax.tree_util.tree_flatten(batch_runs(setup, draws, length))
     shapes = [(tuple(np.shape(leaf))[1:], str(getattr(leaf, "dtype", type(leaf).__name__))) for leaf in leaves]
     sim = scenario.simulation
-    return f"{structure} {shapes} n_steps={sim.n_steps} substeps={sim.substeps} period={sim.control_period!r}"
+    return f"{structure} {shapes} n_steps={length} substeps={sim.substeps} period={sim.control_period!r}"
 
 
 def planned_key(scenario: Scenario, frame: TrajectoryFrame | None) -> str:
@@ -89,7 +91,10 @@ def cells_rows(cells: Sequence[tuple[Prepared, Sequence[int]]], size: int) -> li
     results: list[list[dict]] = [[] for _ in cells]
     for key in dict.fromkeys(keys):
         members = [i for i, k in enumerate(keys) if k == key]
-        runs = [jax.tree_util.tree_map(np.asarray, batch_runs(*cells[i][0][1:])) for i in members]
+        runs = [
+            jax.tree_util.tree_map(np.asarray, batch_runs(*cells[i][0][1:], run_length(cells[i][0][0])))
+            for i in members
+        ]
         bounds = [np.full(len(cells[i][1]), cells[i][0][0].divergence_distance()) for i in members]
         joined = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *runs)
         bound = np.concatenate(bounds)
