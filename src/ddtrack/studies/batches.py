@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ..compilations import call_exported
+from ..compilations import bucketed_length, call_exported
 from ..controllers import Controller
 from ..layout import BODY, POSTURE_ERROR
 from ..metrics import tracking_error
@@ -123,6 +123,17 @@ def series_metrics(
     return metrics
 
 
+def batch_size(runs: int, chunk_size: int) -> int:
+    """The runs of each batch of :func:`monte_carlo` for ``runs`` runs in chunks of at most ``chunk_size``: the chunk
+    size, or for fewer runs their number rounded up to a quarter octave and to an even number (so that counts of
+    runs share a few programs and split over two devices), at most ``chunk_size``. Rows of batches of 16 runs and
+    more may differ in the last bits between batch sizes (docs/reliability.md)."""
+    if runs >= chunk_size:
+        return chunk_size
+    size = bucketed_length(runs)
+    return min(chunk_size, size + size % 2 if size > 1 else size)
+
+
 def drawn_plant(scenario: Scenario, setup: Setup, i: int) -> dict[str, float]:
     """``plant_<field>`` of run ``i`` of a prepared batch, for each ``[randomize]`` draw (in its unit)."""
     drawn = [field for field, draw in scenario.randomize if draw is not None]
@@ -140,7 +151,7 @@ def monte_carlo(
     """Run ``scenario`` once per seed, in vmapped chunks of ``chunk_size`` (memory stays bounded: only
     the metrics are kept); return one row per run: seed, drawn plant values, metrics (``summarize``).
 
-    The last chunk is padded with repeats of its first seed, so every chunk has one shape and compiles once.
+    Every chunk is padded with repeats of its first seed to one :func:`batch_size`, so it compiles once.
 
     Parameters
     ----------
@@ -163,9 +174,10 @@ def monte_carlo(
         :func:`ddtrack.summarize` metrics.
     """
     rows: list[dict] = []
+    size = batch_size(len(seeds), chunk_size)
     for start in range(0, len(seeds), chunk_size):
         chunk = list(seeds[start : start + chunk_size])
-        padded = chunk + [chunk[0]] * (min(chunk_size, len(seeds)) - len(chunk))
+        padded = chunk + [chunk[0]] * (size - len(chunk))
         setup, draws = prepare_batch(scenario, padded, frame=frame)
         for i, (seed, metrics) in enumerate(zip(chunk, batch_metrics(scenario, setup, draws), strict=False)):
             rows.append({"seed": seed, **drawn_plant(scenario, setup, i), **metrics})

@@ -19,7 +19,7 @@ from ..errors import ConfigError
 from ..metrics import METRIC_DOMAINS, improvement, mean_ci, warning_counts
 from ..outdir import atomic_write
 from ..scenario import Scenario, load_scenario
-from .batches import monte_carlo
+from .batches import batch_size, monte_carlo
 from .board import lost, tracking_value
 from .cells import batch_program, planned_key, programs_held
 
@@ -61,7 +61,7 @@ def run_specs(
     ``on_programs(needed, held)`` hears first how many simulation programs the controllers need (one per structure:
     every chunk has one size) and how many the persistent compilation cache holds."""
     seeds = list(range(seed, seed + n))
-    size = min(chunk_size, n)
+    size = batch_size(n, chunk_size)
     programs = {name: batch_program(planned_key(spec, None), size) for name, spec in specs.items()}
     on_programs(len(set(programs.values())), programs_held(programs.values()))
     rows = {}
