@@ -20,7 +20,7 @@ from ddtrack import pytree_dataclass
 from ddtrack.errors import ConfigError
 from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds
-from ddtrack.model.sensed import QUEUE_BUCKET
+from ddtrack.model.sensing import QUEUE_BUCKET
 from ddtrack.scenario import build
 from ddtrack.sim import Draws, simulate
 from ddtrack.trajectories import Line

@@ -34,7 +34,7 @@ from ..integrators import rk4
 from ..layout import BODY, Layout, pose_vector, velocity
 from ..parameters import NonNegative, Parameters, Structure, Timing, declared, declared_fields
 from .plants import ODEPlant
-from .sensing import encoder_angle, odometry_step, split_delay
+from .sensing import encoder_angle, odometry_step, queue_capacity, queue_layout, split_delay
 
 #: the wheel angles a plant with encoders integrates [rad]
 WHEEL_ANGLES = Layout(("phi_r", "phi_l"), ("rad", "rad"))
@@ -45,22 +45,6 @@ CLOCK = Layout(("sensing_clock",), ("",))
 GYRO_STREAM = 1  #: the gyro's draws: the period's key folded once more (the fix's draws use the period's key itself)
 #: estimated minus true pose, logged each period
 ODOMETRY_ERROR = Layout(("odom_ex", "odom_ey", "odom_etheta"), ("m", "m", "rad"))
-
-
-def _queue_layout(prefix: str, layout: Layout, length: int) -> Layout:
-    """The names of a queue of ``length`` vectors of ``layout``, oldest first (``queued_0_tau_r``, ...)."""
-    names = tuple(f"{prefix}_{i}_{name}" for i in range(length) for name in layout.names)
-    return Layout(names, layout.units * length)
-
-
-QUEUE_BUCKET = 16  #: the least capacity of a command queue: delays up to 16 periods share one program
-
-
-def queue_capacity(whole: int, fraction: float) -> int:
-    """The commands a queue for a delay of ``whole`` periods and ``fraction`` of one holds: none without a delay,
-    else the next power of two, at least :data:`QUEUE_BUCKET` (the older commands in it are never read)."""
-    needed = whole + (1 if fraction > 0.0 else 0)
-    return 0 if needed == 0 else max(QUEUE_BUCKET, 1 << (needed - 1).bit_length())
 
 
 def _join(*layouts: Layout) -> Layout:
@@ -185,8 +169,8 @@ class SensedPlant:
         return (
             self.inner.state_layout,
             *odometry,
-            _queue_layout("queued", self.inner.input_layout, self.queue_length),
-            _queue_layout("delayed", BODY, self.reading_capacity),
+            queue_layout("queued", self.inner.input_layout, self.queue_length),
+            queue_layout("delayed", BODY, self.reading_capacity),
             CLOCK if self.clocked else none,
         )
 

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from ..layout import pose_vector
+from ..layout import Layout, pose_vector
 
 SERIES_BELOW = 1e-4  #: |a| [rad] under which sin(a) / a is its Taylor series (error below 1e-22)
 COUNT_SLACK = 8.0 * 2.0**-52  #: relative slack under which a count boundary counts as reached (a few ulps)
@@ -74,6 +74,22 @@ def delay_push(line: DelayLine, value: Array) -> tuple[DelayLine, Array]:
 def delay_contents(line: DelayLine) -> Array:
     """(k, m) the line's vectors, oldest first (``delay_push`` returns them in this order)."""
     return jnp.roll(line.buffer, -line.head, axis=0)
+
+
+def queue_layout(prefix: str, layout: Layout, length: int) -> Layout:
+    """The names of a queue of ``length`` vectors of ``layout``, oldest first (``queued_0_tau_r``, ...)."""
+    names = tuple(f"{prefix}_{i}_{name}" for i in range(length) for name in layout.names)
+    return Layout(names, layout.units * length)
+
+
+QUEUE_BUCKET = 16  #: the least capacity of a command queue or a measurement line: delays up to 16 periods share one
+
+
+def queue_capacity(whole: int, fraction: float) -> int:
+    """The commands a queue for a delay of ``whole`` periods and ``fraction`` of one holds: none without a delay,
+    else the next power of two, at least :data:`QUEUE_BUCKET` (the older commands in it are never read)."""
+    needed = whole + (1 if fraction > 0.0 else 0)
+    return 0 if needed == 0 else max(QUEUE_BUCKET, 1 << (needed - 1).bit_length())
 
 
 def split_delay(delay: float, period: float) -> tuple[int, float]:
