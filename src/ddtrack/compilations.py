@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import gc
 import hashlib
+import itertools
 import logging
 import math
 import os
@@ -221,12 +222,7 @@ def bucketed_length(n: int) -> int:
     """The run length a simulation program of ``n`` control periods is compiled for: the least ceil(2^(j/4)) at
     least ``n`` (a quarter of an octave: at most 19 % more periods), so runs of many lengths share a few programs;
     the periods past ``n`` are simulated and cut."""
-    j = max(0, math.ceil(4 * math.log2(max(n, 1))) - 1)  # the float log may land a step low or high: settle it
-    while math.ceil(2 ** (j / 4)) < n:
-        j += 1
-    while j > 0 and math.ceil(2 ** ((j - 1) / 4)) >= n:
-        j -= 1
-    return math.ceil(2 ** (j / 4))
+    return next(length for j in itertools.count() if (length := math.ceil(2 ** (j / 4))) >= n)
 
 
 def memory_mappings() -> int | None:

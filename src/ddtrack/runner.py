@@ -280,17 +280,25 @@ def run_length(scenario: Scenario) -> int:
 
 
 def within_run(result: SimResult, n_steps: int, *, batched: bool = False) -> SimResult:
-    """``result`` (simulated over :func:`run_length` periods) cut to its first ``n_steps``, on the host: a failure in
-    the periods past them (which only froze what came after it) does not count."""
+    """``result`` (simulated over :func:`run_length` periods) cut to its first ``n_steps``, on the host, its failure
+    :func:`failure_within` them."""
     within = (slice(None),) * (1 if batched else 0) + (slice(None, n_steps),)
     timed = {
         name: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[within], getattr(result, name))
         for name in result._fields
         if name not in ("status", "failure_index")
     }
-    late = np.asarray(result.failure_index) >= n_steps
-    status, failure_index = np.where(late, 0, result.status), np.where(late, -1, result.failure_index)
+    status, failure_index = failure_within(result.status, result.failure_index, n_steps)
     return SimResult(**timed, status=cast(Array, status), failure_index=cast(Array, failure_index))
+
+
+def failure_within(
+    status: Array | np.ndarray, failure_index: Array | np.ndarray, n_steps: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(status, failure index) of runs simulated past their ``n_steps`` periods: a failure in the periods past them
+    (which only froze what came after it) is none, ``ok`` at index -1."""
+    late = np.asarray(failure_index) >= n_steps
+    return np.where(late, 0, status), np.where(late, -1, failure_index)
 
 
 def run_options(scenario: Scenario) -> dict:

@@ -23,7 +23,7 @@ from ..metrics import tracking_error
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..model.sensed import ODOMETRY_ERROR
 from ..plausibility import traction_columns
-from ..runner import batch_runs, loading_warnings, prepare_batch, run_length, run_metrics
+from ..runner import batch_runs, failure_within, loading_warnings, prepare_batch, run_length, run_metrics
 from ..scenario import Scenario, Setup
 from ..sim import STATUS_NAMES, Draws, simulate_batch
 from ..sim.batch import in_shares
@@ -99,10 +99,10 @@ def series_metrics(
     nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
     lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
     loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
+    status, failure_index = failure_within(status, failure_index, sim.n_steps)  # simulated over the run length
     metrics = []
     for i in range(len(status)):
-        k = int(failure_index[i]) if failure_index[i] < sim.n_steps else -1  # a failure past the run's end: none
-        status_i = int(status[i]) if k >= 0 else 0
+        k = int(failure_index[i])
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
         columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
         columns = {name: value[valid] for name, value in columns.items()}
@@ -113,7 +113,7 @@ def series_metrics(
             run_metrics(
                 scenario,
                 columns,
-                status=STATUS_NAMES[status_i],
+                status=STATUS_NAMES[int(status[i])],
                 failure_time=None if k < 0 else float(t[k]),
                 nmse=None if nmse is None else nmse[i],
                 lost_path_error=lost_path_error,
