@@ -616,12 +616,12 @@ def time_ddtrack(scenario, setup, draws, repeats: int) -> dict:
     alone."""
     import jax
 
-    from ddtrack.runner import batch_runs, run_length, run_options
+    from ddtrack.runner import run_length, simulation_args
     from ddtrack.sim.batch import in_shares
     from ddtrack.studies.batches import _metric_series, batch_metrics
 
-    runs = batch_runs(setup, draws, run_length(scenario))  # the draws padded to the run length, as batch_metrics
-    series = partial(_metric_series, **run_options(scenario) | {"n_steps": run_length(scenario)})
+    runs = simulation_args(scenario, setup, draws, run_length(scenario))  # padded to the run length, as batch_metrics
+    series = partial(_metric_series, n_steps=run_length(scenario))
     simulate_only = lambda: jax.block_until_ready(in_shares(series, *runs))  # noqa: E731  # as batch_metrics
     metrics = lambda: batch_metrics(scenario, setup, draws)  # noqa: E731
     start = time.perf_counter()

@@ -140,7 +140,7 @@ def measure_library(
     import ddtrack
 
     ddtrack.enable_float64()
-    from ddtrack.runner import run_setup
+    from ddtrack.runner import closed_loop, run_setup
 
     import_s = time.perf_counter() - start
     jax.config.update("jax_enable_compilation_cache", False)  # a real compile, whatever the environment says
@@ -171,19 +171,10 @@ def measure_library(
 
     setup, draws = ddtrack.prepare(scenario)
     sim = scenario.simulation
-    plant = setup.plant
-    options = {
-        "n_steps": sim.n_steps,
-        "control_period": sim.control_period,
-        "substeps": sim.substeps,
-        "disturbance": setup.disturbance,
-        "noise": setup.noise,
-        "divergence_error": scenario.divergence_distance(),
-    }
-    x0 = jnp.asarray(setup.x0)
+    loop, x0 = closed_loop(scenario, setup), jnp.asarray(setup.x0)
 
     def simulate_only():
-        return jax.block_until_ready(ddtrack.simulate(plant, setup.controller, setup.trajectory, x0, draws, **options))
+        return jax.block_until_ready(ddtrack.simulate(loop, x0, draws, n_steps=sim.n_steps))
 
     simulate_only()
     simulate = timings(simulate_only, repeats)

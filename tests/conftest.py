@@ -44,19 +44,11 @@ def simulate_unbatched(scenario, setup, draws):
     """A prepared run (``ddtrack.runner.prepare``) through the unbatched simulator, ``ddtrack.sim.simulate``, as a
     ``SimResult``. ``ddtrack run`` simulates it as row 0 of a batch of two (``ddtrack.sim.simulate_alone``), which
     compiles about a third slower and rounds a few values differently in the last bit (both measured)."""
-    from ddtrack.runner import run_options
+    from ddtrack.runner import closed_loop
     from ddtrack.sim import simulate
 
-    return simulate(
-        setup.plant,
-        setup.controller,
-        setup.trajectory,
-        setup.x0,
-        draws,
-        disturbance=setup.disturbance,
-        noise=setup.noise,
-        **run_options(scenario),  # the options ddtrack run's program takes
-    )
+    # the loop ddtrack run's program takes
+    return simulate(closed_loop(scenario, setup), setup.x0, draws, n_steps=scenario.simulation.n_steps)
 
 
 @pytest.fixture(scope="session", autouse=True)

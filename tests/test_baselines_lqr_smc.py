@@ -14,7 +14,7 @@ import ddtrack
 from ddtrack.controllers import Backstepping, Cascade, ComputedTorque, VelocityCommand
 from ddtrack.controllers.baselines import LTVUnicycleLQR, SlidingModeTorque, switching_term, unicycle_error_model
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance, pose_rate, reduced_input, reduced_mass
-from ddtrack.sim import Draws, simulate, stack
+from ddtrack.sim import ClosedLoop, Draws, simulate, stack
 from ddtrack.trajectories import Circle, Line
 
 EXACT = RobotParams(max_torque=1e9)  # nominal robot, no friction, torque limit off
@@ -141,16 +141,8 @@ def smc_runs():
     line = Line(start=(0.0, 0.0), heading=0.0, speed=0.5)
 
     def one(controller):
-        return simulate(
-            DynamicPlant(EXACT),
-            controller,
-            line,
-            jnp.zeros(5),
-            Draws.zeros(SMC_STEPS),
-            n_steps=SMC_STEPS,
-            control_period=TC,
-            disturbance=CONSTANT,
-        )
+        loop = ClosedLoop(DynamicPlant(EXACT), controller, line, CONSTANT, control_period=TC)
+        return simulate(loop, jnp.zeros(5), Draws.zeros(SMC_STEPS), n_steps=SMC_STEPS)
 
     result = jax.jit(jax.vmap(one))(stack(controllers))
     assert np.all(np.asarray(result.status) == 0)

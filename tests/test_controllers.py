@@ -30,7 +30,7 @@ from ddtrack.controllers import (
 )
 from ddtrack.geometry import posture_error
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance, body_acceleration, wheel_speeds
-from ddtrack.sim import Draws, rk4_step, simulate
+from ddtrack.sim import ClosedLoop, Draws, rk4_step, simulate
 from ddtrack.trajectories import Circle, FigureEight, Line, Reference
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -64,17 +64,10 @@ def run(
     substeps=10,
     disturbance=WheelDisturbance(bias=(0.0, 0.0), amplitude=(0.0, 0.0), frequency=0.0, phase=(0.0, 0.0)),
 ):
-    return simulate(
-        DynamicPlant(plant),
-        controller,
-        trajectory,
-        jnp.asarray(x0, dtype=float),
-        Draws.zeros(n),
-        n_steps=n,
-        control_period=control_period,
-        substeps=substeps,
-        disturbance=disturbance,
+    loop = ClosedLoop(
+        DynamicPlant(plant), controller, trajectory, disturbance, control_period=control_period, substeps=substeps
     )
+    return simulate(loop, jnp.asarray(x0, dtype=float), Draws.zeros(n), n_steps=n)
 
 
 def on_reference(trajectory, moving: bool = True, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -492,18 +485,16 @@ def test_clamps_and_saturated_log(max_torque):
     plant = dataclasses.replace(setup.plant_params, max_torque=max_torque)
     controller = Cascade(setup.controller.outer, ComputedTorque(nominal, kc=setup.controller.inner.kc))
     n = scenario.simulation.n_steps
-    result = simulate(
+    loop = ClosedLoop(
         DynamicPlant(plant),
         controller,
         setup.trajectory,
-        setup.x0,
-        draws,
-        n_steps=n,
+        setup.disturbance,
+        setup.noise,
         control_period=scenario.simulation.control_period,
         substeps=scenario.simulation.substeps,
-        disturbance=setup.disturbance,
-        noise=setup.noise,
     )
+    result = simulate(loop, setup.x0, draws, n_steps=n)
     assert result.status_name == "ok"
     cols = ddtrack.timeseries(result)
     tau = np.stack([cols["tau_r"], cols["tau_l"]], axis=1)

@@ -9,6 +9,7 @@ parquet and metrics.json equal), tests/test_batch.py (batch rows and Monte Carlo
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -250,7 +251,7 @@ def test_single_and_batched_runs_take_the_same_divergence_options():
     0.3 m/s bound stops the paper's line run, which reaches 1.9 m/s, at the same period in every form."""
     import jax.numpy as jnp
 
-    from ddtrack.runner import prepare
+    from ddtrack.runner import closed_loop, prepare
     from ddtrack.sim import simulate, simulate_alone, simulate_batch, stack
 
     scenario = ddtrack.load_scenario(
@@ -258,15 +259,14 @@ def test_single_and_batched_runs_take_the_same_divergence_options():
     )
     setup, draws = prepare(scenario, seed=0)
     sim = scenario.simulation
-    run = (setup.plant, setup.controller, setup.trajectory, jnp.asarray(setup.x0), draws)
-    steps = {"n_steps": sim.n_steps, "control_period": sim.control_period, "substeps": sim.substeps}
-    common = {**steps, "divergence_error": 100.0, "divergence_speed": 0.3}
-    lone = simulate(*run, **common, disturbance=setup.disturbance, noise=setup.noise)
-    alone = simulate_alone(*run, setup.disturbance, setup.noise, **common)
-    batch = simulate_batch(*stack([(*run, setup.disturbance, setup.noise)] * 2), **common)
+    loop = dataclasses.replace(closed_loop(scenario, setup), divergence_error=100.0)
+    run = (dataclasses.replace(loop, divergence_speed=0.3), jnp.asarray(setup.x0), draws)
+    lone = simulate(*run, n_steps=sim.n_steps)
+    alone = simulate_alone(*run, n_steps=sim.n_steps)
+    batch = simulate_batch(*stack([run] * 2), n_steps=sim.n_steps)
     indices = [int(lone.failure_index), int(alone.failure_index), *map(int, batch.failure_index)]
     assert lone.status_name == "diverged" and len(set(indices)) == 1 and indices[0] > 0, indices
-    unbounded = simulate_alone(*run, setup.disturbance, setup.noise, **steps, divergence_error=100.0)
+    unbounded = simulate_alone(loop, *run[1:], n_steps=sim.n_steps)
     assert unbounded.status_name == "ok"  # the default bound (DIVERGENCE_SPEED, 50 m/s) lets it run
 
 

@@ -176,7 +176,7 @@ def test_reset_draws_the_run_s_plant_and_randomness_from_the_seed():
         assert env.setup.plant_params == setup.plant_params and info["seed"] == seed
         assert np.array_equal(env.draws.disturbance, draws.disturbance)
         assert np.array_equal(env.draws.noise, draws.noise)
-        assert np.array_equal(env._episode.plant.params.mass, setup.plant_params.mass)  # what it simulates
+        assert np.array_equal(env._episode.loop.plant.params.mass, setup.plant_params.mass)  # what it simulates
         masses.add(setup.plant_params.mass)
     assert len(masses) == 2
     # no seed: one is drawn from the environment's generator, so a seeded first reset fixes the next ones

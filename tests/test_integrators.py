@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 import ddtrack  # noqa: F401  (turns on float64)
 from ddtrack import pytree_dataclass
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance
-from ddtrack.sim import Draws, rk4, rk4_step, simulate
+from ddtrack.sim import ClosedLoop, Draws, rk4, rk4_step, simulate
 from ddtrack.trajectories import Line
 
 CONTROL_PERIOD = 0.01
@@ -204,18 +204,16 @@ def test_simulator_schedule_matches_scipy(forward_drive):
             return self.table[k], k + 1, {}
 
     plant = DynamicPlant(RobotParams(**TRUE))
-    result = simulate(
+    loop = ClosedLoop(
         plant,
         Replay(jnp.asarray(torques)),
         Line(),
-        jnp.asarray(x0),
-        Draws.zeros(N_PERIODS),
-        n_steps=N_PERIODS,
+        WheelDisturbance(bias=tuple(TAU_D)),
         control_period=CONTROL_PERIOD,
-        substeps=SUBSTEPS,
-        disturbance=WheelDisturbance(bias=tuple(TAU_D)),
         divergence_error=1e9,
+        substeps=SUBSTEPS,
     )
+    result = simulate(loop, jnp.asarray(x0), Draws.zeros(N_PERIODS), n_steps=N_PERIODS)
     assert int(result.status) == 0
     # simulate records x_k at t_k (k = 0..N-1), the state before the k-th period's integration
     np.testing.assert_allclose(np.asarray(result.state), reference[:-1], rtol=0, atol=1e-8)  # as above

@@ -26,7 +26,7 @@ from ddtrack.metrics import (
     window_statistics,
 )
 from ddtrack.model import DynamicPlant, RobotParams
-from ddtrack.sim import Draws, simulate
+from ddtrack.sim import ClosedLoop, Draws, simulate
 from ddtrack.trajectories import Line
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -151,15 +151,8 @@ def test_summarize_failed_run_is_null_and_valid_json():
     ref0 = trajectory(0.0)
     x0 = jnp.asarray([float(ref0.x), float(ref0.y) + 0.5, float(ref0.theta) + 0.3, 0.0, 0.0])
     n = 2000
-    result = simulate(
-        DynamicPlant(RobotParams(max_torque=1e9)),
-        controller,
-        trajectory,
-        x0,
-        Draws.zeros(n),
-        n_steps=n,
-        control_period=0.01,
-    )
+    loop = ClosedLoop(DynamicPlant(RobotParams(max_torque=1e9)), controller, trajectory, control_period=0.01)
+    result = simulate(loop, x0, Draws.zeros(n), n_steps=n)
     assert result.status_name in ("diverged", "non_finite")
     columns = ddtrack.timeseries(result)
     metrics = summarize(

@@ -236,7 +236,9 @@ def test_torque_columns_come_from_the_plant_kind():
 
     line = Line(heading=0.3, speed=0.5)
     x0 = jnp.array([0.0, 0.2, 0.0, 0.0, 0.0])
-    kinematic = ddtrack.simulate(KinematicPlant(), Backstepping(), line, x0, Draws.zeros(50), n_steps=50)
+    kinematic = ddtrack.simulate(
+        ddtrack.ClosedLoop(KinematicPlant(), Backstepping(), line), x0, Draws.zeros(50), n_steps=50
+    )
     columns = ddtrack.timeseries(kinematic)
     assert np.all(np.isnan(columns["tau_r"])) and np.all(np.isnan(columns["tau_l"]))  # a velocity input has no torque
     assert np.array_equal(columns["v_cmd"], np.asarray(kinematic.control[:, 0]))

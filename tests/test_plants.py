@@ -130,9 +130,8 @@ def test_a_controller_the_plant_cannot_take_is_refused_when_assembled():
     with pytest.raises(ddtrack.ConfigError, match="(?s)plant.model: unknown plant 'wheel_angle'.*'wheel_angles'"):
         scenario("plant.model=wheel_angle")
     with pytest.raises(ValueError, match="Cascade outputs torque commands but KinematicPlant takes velocity"):
-        ddtrack.simulate(
-            KinematicPlant(), setup.controller, setup.trajectory, setup.x0, ddtrack.sim.Draws.zeros(5), n_steps=5
-        )
+        loop = ddtrack.ClosedLoop(KinematicPlant(), setup.controller, setup.trajectory)
+        ddtrack.simulate(loop, setup.x0, ddtrack.sim.Draws.zeros(5), n_steps=5)
 
 
 def test_registration_checks_the_plant():

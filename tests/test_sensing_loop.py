@@ -22,7 +22,7 @@ from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds
 from ddtrack.model.sensing import QUEUE_BUCKET
 from ddtrack.scenario import build
-from ddtrack.sim import Draws, simulate
+from ddtrack.sim import ClosedLoop, Draws, simulate
 from ddtrack.trajectories import Line
 
 T = 0.01  #: control period [s]
@@ -53,7 +53,9 @@ class OpenLoopVelocity(OpenLoop):
 
 def run(plant, controller=None, n_steps: int = N):
     controller = OpenLoop() if controller is None else controller
-    return simulate(plant, controller, Line(), jnp.zeros(5), Draws.zeros(n_steps), n_steps=n_steps, control_period=T)
+    return simulate(
+        ClosedLoop(plant, controller, Line(), control_period=T), jnp.zeros(5), Draws.zeros(n_steps), n_steps=n_steps
+    )
 
 
 def sensed(
@@ -370,7 +372,7 @@ def test_a_batch_and_the_environment_see_the_sensing_chain():
         np.testing.assert_array_equal(a, b)  # a batch's row is the run alone, bit for bit
     env = DiffDriveTrackingEnv(scenario, action_mode="gains")
     env.reset(seed=0)
-    assert isinstance(env._episode.plant, SensedPlant)
+    assert isinstance(env._episode.loop.plant, SensedPlant)
     _, _, terminated, _, _ = env.step(np.zeros(3))
     assert not terminated
 

@@ -51,6 +51,7 @@ if TYPE_CHECKING:  # type checkers and IDEs see the public names; at run time th
     from .scenario import register_plant as register_plant
     from .scenario import register_trajectory as register_trajectory
     from .scenario import validate_scenario as validate_scenario
+    from .sim import ClosedLoop as ClosedLoop
     from .sim import Draws as Draws
     from .sim import SimResult as SimResult
     from .sim import simulate as simulate
@@ -76,6 +77,7 @@ _SOURCES = {
     "register_trajectory": "scenario",
     "load_scenario": "scenario",
     "validate_scenario": "scenario",
+    "ClosedLoop": "sim",
     "Draws": "sim",
     "SimResult": "sim",
     "simulate": "sim",

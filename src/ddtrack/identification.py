@@ -21,9 +21,10 @@ from ._pytree import FloatVector
 from .controllers import Backstepping, Cascade, Dithered, Emulator, NNAdaptiveParameters, VelocityOutput
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
+from .layout import BODY
 from .model import DynamicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .parameters import TIMING
-from .sim import Draws, simulate
+from .sim import ClosedLoop, Draws, simulate
 from .trajectories import SampledTrajectory, unicycle_reference
 
 
@@ -100,21 +101,20 @@ def collect(
     draws = Draws(jax.random.normal(k_dist, (n, 2)), jax.random.normal(k_noise, (n, 5)), k_ctrl)
     ref0 = trajectory(0.0)
     x0 = jnp.stack([ref0.x, ref0.y, ref0.theta, 0.0, 0.0])
-    result = simulate(
+    loop = ClosedLoop(
         DynamicPlant(plant) if isinstance(plant, RobotParams) else plant,
         VelocityOutput(outer) if inner is None else Cascade(outer, inner),
         trajectory,
-        x0,
-        draws,
-        n_steps=n,
+        disturbance,
+        noise,
         control_period=control_period,
         substeps=substeps,
-        disturbance=disturbance,
-        noise=noise,
     )
+    result = simulate(loop, x0, draws, n_steps=n)
     nu_c = jnp.stack([result.logs["v_cmd"], result.logs["omega_cmd"]], axis=1)
-    z = jax.vmap(emulator.inputs)(nu_c, result.state[:, 3:5])[:-1]
-    targets = jax.vmap(body_increment)(result.state[:-1, :3], result.state[1:, :3])
+    posture = BODY.span(result.state, "x", "theta")
+    z = jax.vmap(emulator.inputs)(nu_c, BODY.span(result.state, "v", "omega"))[:-1]
+    targets = jax.vmap(body_increment)(posture[:-1], posture[1:])
     return z, targets
 
 

@@ -30,7 +30,7 @@ from .model import MeasurementNoise, RobotParams, WheelDisturbance
 from .plausibility import motor_metrics, motor_warnings, speed_warnings, traction_columns, traction_warnings
 from .scenario import NNAdaptiveConfig, ParameterDraw, Scenario, Setup, build
 from .scenario.motor_configs import check_drive, motor_or_none
-from .sim import Draws, SimResult, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
+from .sim import ClosedLoop, Draws, SimResult, repeated, simulate_alone, simulate_batch, stack, timeseries, vmap_runs
 from .sim.batch import Batched, in_shares
 from .trajectories.switched import TrajectoryFrame
 
@@ -263,13 +263,12 @@ def run(scenario: Scenario, *, seed: int | None = None) -> SimResult:
 def run_setup(scenario: Scenario, setup: Setup, draws: Draws, *, batched: bool = False) -> SimResult:
     """Simulate a prepared run (:func:`prepare`), or a prepared batch (:func:`prepare_batch`, ``batched``), over its
     :func:`run_length` and cut to the scenario's periods (:func:`within_run`)."""
-    runs = batch_runs(setup, draws, run_length(scenario))
-    options = run_options(scenario) | {"n_steps": run_length(scenario)}
+    loop, x0, draws = simulation_args(scenario, setup, draws, run_length(scenario))
+    static = {"n_steps": run_length(scenario)}
     if batched:  # setup.plant: the true robot, or the unicycle for a kinematic controller on a torque-driven robot
-        result = simulate_batch(*runs, **options)
-    else:  # as a batch's row, bit for bit; the rest of the options are traced numbers
-        static = {name: options.pop(name) for name in ("n_steps", "substeps")}
-        result = call_exported("simulate_alone", simulate_alone, runs, options, static)
+        result = simulate_batch(loop, x0, draws, **static)
+    else:  # as a batch's row, bit for bit
+        result = call_exported("simulate_alone", simulate_alone, (loop, x0, draws), {}, static)
     return within_run(result, scenario.simulation.n_steps, batched=batched)
 
 
@@ -299,22 +298,6 @@ def failure_within(
     (which only froze what came after it) is none, ``ok`` at index -1."""
     late = np.asarray(failure_index) >= n_steps
     return np.where(late, 0, status), np.where(late, -1, failure_index)
-
-
-def run_options(scenario: Scenario) -> dict:
-    """The static timing and the limits every simulation of ``scenario`` takes (single run, batch, Monte Carlo
-    chunk): keyword arguments of ``ddtrack.sim.simulate`` and its batched forms."""
-    return {
-        "n_steps": scenario.simulation.n_steps,
-        **timing(scenario),
-        "divergence_error": scenario.divergence_distance(),
-    }
-
-
-def timing(scenario: Scenario) -> dict:
-    """The control period [s] (a traced number) and the substeps (a static loop bound) of ``scenario``'s simulations."""
-    sim = scenario.simulation
-    return {"control_period": sim.control_period, "substeps": sim.substeps}
 
 
 def loading_warnings(scenario: Scenario) -> list[dict]:
@@ -390,13 +373,33 @@ def run_record(scenario: Scenario, setup: Setup, result: SimResult) -> tuple[dic
     return columns, metrics
 
 
-def batch_runs(setup: Setup, draws: Draws, length: int | None = None) -> tuple:
-    """The arguments of a prepared run's or batch's simulation, in order (plant, controller, trajectory, x0, draws,
-    disturbance, noise): without the divergence bound, the timing and the run length. ``length``: the draws padded
+def closed_loop(scenario: Scenario, setup: Setup) -> ClosedLoop:
+    """The loop every simulation of a prepared run (:func:`prepare`) takes: its plant, controller, trajectory,
+    disturbance and noise, with ``scenario``'s timing and divergence bound; for a prepared batch
+    (:func:`prepare_batch`), the numbers repeated along the run axis (:func:`~ddtrack.sim.repeated`)."""
+    sim = scenario.simulation
+    loop = ClosedLoop(
+        setup.plant,
+        setup.controller,
+        setup.trajectory,
+        setup.disturbance,
+        setup.noise,
+        control_period=sim.control_period,
+        divergence_error=scenario.divergence_distance(),
+        substeps=sim.substeps,
+    )
+    x0 = np.asarray(setup.x0)
+    return loop if x0.ndim == 1 else repeated(loop, len(x0))
+
+
+def simulation_args(
+    scenario: Scenario, setup: Setup, draws: Draws, length: int | None = None
+) -> tuple[ClosedLoop, Array, Draws]:
+    """(loop, x0, draws) of a prepared run's or batch's simulation (:func:`closed_loop`). ``length``: the draws padded
     with zeros to that many periods (:func:`run_length`; the periods past the run's own are cut)."""
     if length is not None:
         draws = draws._replace(disturbance=_padded(draws.disturbance, length), noise=_padded(draws.noise, length))
-    return (setup.plant, setup.controller, setup.trajectory, setup.x0, draws, setup.disturbance, setup.noise)
+    return closed_loop(scenario, setup), setup.x0, draws
 
 
 def _padded(series: Array, length: int) -> Array:

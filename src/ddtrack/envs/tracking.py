@@ -108,16 +108,10 @@ RESET_OPTIONS = ("initial_pose",)
 class _Episode(NamedTuple):
     """What one episode's jitted steps read and never change (a pytree: new values never recompile)."""
 
-    plant: Any
-    controller: Any  #: the Kanayama-based controller (gains mode), else None
-    trajectory: Any
-    disturbance: Any
-    noise: Any
+    loop: ClosedLoop  #: the run's loop; its controller the Kanayama-based one (gains mode), else None
     xi_disturbance: Array  #: (N, 2) the run's disturbance draws
     xi_noise: Array  #: (N, 5) the run's noise draws
-    control_period: Array  #: T_c [s]
     n_steps: Array  #: N
-    divergence_error: Array  #: [m]
     torque_scale: Array  #: action 1 -> this torque [N m]
     effort_weight: Array  #: [1/(N m)^2]
     cost_bound: Array  #: cost per second charged for the rest of a terminated episode
@@ -154,9 +148,10 @@ PACKED = Layout(("reward", "status", "e_tr", "u_0", "u_1", *BODY.names, "kx", "k
 
 def _observe(episode: _Episode, x: Array, k: Array, gains: Array | None) -> tuple[Array, Array, Array]:
     """Observation at period k of state x (measured with draw k), and the true error's cost J and e_tr."""
-    ref = episode.trajectory(k * episode.control_period)
-    body = episode.plant.observe(x)
-    y = episode.noise.measure(measured(episode.plant, x), episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
+    loop = episode.loop
+    ref = loop.trajectory(k * loop.control_period)
+    body = loop.plant.observe(x)
+    y = loop.noise.measure(measured(loop.plant, x), episode.xi_noise[jnp.minimum(k, episode.n_steps - 1)])
     e = posture_error(*pose(y), ref.x, ref.y, ref.theta)
     parts = [e[0], e[1], jnp.sin(e[2]), jnp.cos(e[2]), *velocity(y), ref.v, ref.omega]
     observation = jnp.stack(parts if gains is None else [*parts, *gains])
@@ -170,15 +165,16 @@ def _observe(episode: _Episode, x: Array, k: Array, gains: Array | None) -> tupl
 def _start(episode: _Episode, body0: Array, key: Array, *, gains_mode: bool) -> tuple[Array, Any, Array]:
     """The plant's initial state and the controller's memory (as ``simulate`` initialises them) from the BODY state
     ``body0``, and the packed first observation."""
-    x0 = episode.plant.init(jnp.asarray(body0, dtype=float))
-    memory = episode.controller.init(measured(episode.plant, x0), episode.trajectory(0.0), key) if gains_mode else ()
+    loop = episode.loop
+    x0 = loop.plant.init(jnp.asarray(body0, dtype=float))
+    memory = loop.controller.init(measured(loop.plant, x0), loop.trajectory(0.0), key) if gains_mode else ()
     observation, _, e_tr = _observe(episode, x0, jnp.asarray(0), episode.gain_anchor if gains_mode else None)
     return x0, memory, jnp.concatenate([observation, jnp.stack([e_tr])])
 
 
-@partial(jax.jit, static_argnames=("gains_mode", "substeps"))
+@partial(jax.jit, static_argnames=("gains_mode",))
 def _step(
-    episode: _Episode, x: Array, memory: Any, k: Array, action: Array, *, gains_mode: bool, substeps: int
+    episode: _Episode, x: Array, memory: Any, k: Array, action: Array, *, gains_mode: bool
 ) -> tuple[Array, Any, Array]:
     """Period k of :func:`ddtrack.sim.simulate`'s loop with the action in place of (or inside) the controller.
 
@@ -188,7 +184,7 @@ def _step(
     """
     if gains_mode:
         gains = _gains(episode, action)
-        controller = episode.controller
+        controller = episode.loop.controller
         if not hasattr(controller, "outer"):  # kinematic backstepping: the law alone is the controller
             controller = dataclasses.replace(controller, kx=gains[0], ky=gains[1], ktheta=gains[2])
         else:  # a Cascade, or a VelocityOutput (inner = "none")
@@ -197,27 +193,17 @@ def _step(
     else:
         gains = None
         controller = HeldTorques(action * episode.torque_scale)
-    loop = ClosedLoop(
-        episode.plant,
-        controller,
-        episode.trajectory,
-        episode.disturbance,
-        episode.noise,
-        episode.control_period,
-        episode.divergence_error,
-        DIVERGENCE_SPEED,
-        substeps,
-    )
+    loop = dataclasses.replace(episode.loop, controller=controller)
     x_next, next_memory, status, (_, _, _, u, _) = loop.period(
         x, memory, jnp.asarray(0), k, episode.xi_disturbance[k], episode.xi_noise[k]
     )
     keep = status == 0
     observation, cost, e_tr = _observe(episode, x_next, k + 1, gains)
-    effort = jnp.sum(u**2) if episode.plant.input_kind == "torque" else jnp.asarray(0.0)
+    effort = jnp.sum(u**2) if loop.plant.input_kind == "torque" else jnp.asarray(0.0)
     remaining = episode.n_steps - k  # this period and the ones after it
     cost = jnp.where(keep, cost + episode.effort_weight * effort, remaining * episode.cost_bound)
-    reward = -episode.control_period * cost
-    parts = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, episode.plant.observe(x_next)]
+    reward = -loop.control_period * cost
+    parts = [observation, jnp.stack([reward, status.astype(float), e_tr]), u, loop.plant.observe(x_next)]
     return x_next, next_memory, jnp.concatenate(parts if gains is None else [*parts, gains])
 
 
@@ -357,16 +343,19 @@ class DiffDriveTrackingEnv(gymnasium.Env):
         else:
             anchor = log_up = log_down = np.ones(3)
         self._episode = _Episode(
-            plant=plant,
-            controller=setup.controller if self._gains_mode else None,
-            trajectory=setup.trajectory,
-            disturbance=setup.disturbance,
-            noise=setup.noise,
+            loop=ClosedLoop(
+                plant,
+                setup.controller if self._gains_mode else None,
+                setup.trajectory,
+                setup.disturbance,
+                setup.noise,
+                control_period=jnp.asarray(c["control_period"]),
+                divergence_error=jnp.asarray(c["divergence_error"]),
+                substeps=self.scenario.simulation.substeps,
+            ),
             xi_disturbance=draws.disturbance,
             xi_noise=draws.noise,
-            control_period=jnp.asarray(c["control_period"]),
             n_steps=jnp.asarray(c["n_steps"]),
-            divergence_error=jnp.asarray(c["divergence_error"]),
             torque_scale=jnp.asarray(c["torque_scale"]),
             effort_weight=jnp.asarray(c["effort_weight"]),
             cost_bound=jnp.asarray(cost_bound),
@@ -402,7 +391,6 @@ class DiffDriveTrackingEnv(gymnasium.Env):
             self._k,
             action,
             gains_mode=self._gains_mode,
-            substeps=self.scenario.simulation.substeps,
         )
         self._k += 1
         host = np.asarray(packed)

@@ -1,10 +1,11 @@
 """The simulator: fixed-step RK4 under a zero-order hold, one ``lax.scan`` per run (docs/architecture.md)."""
 
 from ..integrators import rk4, rk4_step
-from .batch import simulate_alone, simulate_batch, stack, vmap_runs
+from .batch import repeated, simulate_alone, simulate_batch, stack, vmap_runs
 from .result import REMEDIES, STATUS_NAMES, SimResult, remedy, timeseries
 from .sensitivity import NominalPeriod
 from .simulate import (
+    DIVERGENCE_ERROR,
     DIVERGENCE_SPEED,
     ClosedLoop,
     Draws,
@@ -17,6 +18,7 @@ from .simulate import (
 )
 
 __all__ = [
+    "DIVERGENCE_ERROR",
     "DIVERGENCE_SPEED",
     "REMEDIES",
     "STATUS_NAMES",
@@ -29,6 +31,7 @@ __all__ = [
     "plant_period",
     "recorded",
     "remedy",
+    "repeated",
     "require_matching_input",
     "rk4",
     "rk4_step",

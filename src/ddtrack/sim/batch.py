@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
@@ -14,7 +15,7 @@ from jax import Array
 
 from ..precision import float64_in_this_thread
 from .result import SimResult
-from .simulate import DIVERGENCE_SPEED, simulate
+from .simulate import ClosedLoop, Draws, simulate
 
 
 def stack(trees: Sequence[Any]) -> Any:
@@ -38,80 +39,33 @@ def vmap_runs(function: Callable) -> Callable:
     return batched
 
 
-@partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def simulate_batch(
-    plant: Any,
-    controller: Any,
-    trajectory: Any,
-    x0: Any,
-    draws: Any,
-    disturbance: Any,
-    noise: Any,
-    *,
-    n_steps: int,
-    control_period: float,
-    substeps: int,
-    divergence_error: Array | float,
-    divergence_speed: float = DIVERGENCE_SPEED,
-) -> SimResult:
-    """Run B simulations at once; every argument but the static ones has a leading batch axis B, and
-    ``divergence_error`` [m] is one bound for all or one per run (a study's cells batched together differ in it).
+@partial(jax.jit, static_argnames=("n_steps",))
+def simulate_batch(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimResult:
+    """Run B simulations at once: every leaf of ``loop`` (its numbers included: each run has its own control period
+    and bounds, so a study's cells can share a batch), ``x0`` and ``draws`` has a leading run axis B.
 
     Row i is the run :func:`simulate` would give for the arguments' row i (the same code, vmapped).
     """
-    runs = len(jnp.asarray(x0))
-    bounds = jnp.broadcast_to(jnp.asarray(divergence_error, dtype=float), (runs,))
-
-    def one(plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error):
-        return simulate(
-            plant,
-            controller,
-            trajectory,
-            x0,
-            draws,
-            n_steps=n_steps,
-            control_period=control_period,
-            substeps=substeps,
-            disturbance=disturbance,
-            noise=noise,
-            divergence_error=divergence_error,
-            divergence_speed=divergence_speed,
-        )
-
-    return vmap_runs(one)(plant, controller, trajectory, x0, draws, disturbance, noise, bounds)
+    return vmap_runs(partial(simulate, n_steps=n_steps))(loop, x0, draws)
 
 
-@partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def simulate_alone(
-    plant: Any,
-    controller: Any,
-    trajectory: Any,
-    x0: Any,
-    draws: Any,
-    disturbance: Any,
-    noise: Any,
-    *,
-    n_steps: int,
-    control_period: float,
-    substeps: int,
-    divergence_error: Array | float,
-    divergence_speed: float = DIVERGENCE_SPEED,
-) -> SimResult:
-    """One run (arguments without a batch axis) as row 0 of :func:`simulate_batch`, so that its bits equal its row
-    in any batch; adding and removing the batch axis happen inside this one compiled program (no per-leaf dispatch).
+@partial(jax.jit, static_argnames=("n_steps",))
+def simulate_alone(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimResult:
+    """One run (arguments without a run axis) as row 0 of :func:`simulate_batch`, so that its bits equal its row
+    in any batch; adding and removing the run axis happen inside this one compiled program (no per-leaf dispatch).
     """
-    runs = jax.tree_util.tree_map(
-        lambda leaf: jnp.asarray(leaf)[None], (plant, controller, trajectory, x0, draws, disturbance, noise)
-    )
-    batch = simulate_batch(
-        *runs,
-        n_steps=n_steps,
-        control_period=control_period,
-        substeps=substeps,
-        divergence_error=divergence_error,
-        divergence_speed=divergence_speed,
-    )
-    return jax.tree_util.tree_map(lambda leaf: leaf[0], batch)
+    runs = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], (loop, x0, draws))
+    return jax.tree_util.tree_map(lambda leaf: leaf[0], simulate_batch(*runs, n_steps=n_steps))
+
+
+def repeated(loop: ClosedLoop, runs: int) -> ClosedLoop:
+    """``loop`` whose numbers shared by every run (control period, bounds: scalars) are repeated along a leading run
+    axis of ``runs``, its other leaves (already stacked, e.g. a prepared batch's plants) as they are."""
+    numbers: dict[str, Any] = {
+        name: np.full(runs, getattr(loop, name), dtype=float)
+        for name in ("control_period", "divergence_error", "divergence_speed")
+    }
+    return dataclasses.replace(loop, **numbers)
 
 
 Batched = TypeVar("Batched")

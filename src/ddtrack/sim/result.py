@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import NamedTuple
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
 from jax import Array
 
-from ..layout import BODY, POSTURE_ERROR
+from ..layout import BODY, POSTURE_ERROR, WHEEL_TORQUES
 from ..trajectories import Reference
 
 STATUS_NAMES = ("ok", "diverged", "non_finite")
@@ -102,6 +102,41 @@ class SimResult(NamedTuple):
 jax.export.register_namedtuple_serialization(SimResult, serialized_name="ddtrack.SimResult")
 
 
+#: the documented columns that lead ``timeseries.parquet``, in order; the other logs and plant states follow
+LEADING_COLUMNS = ("t", *BODY.names, "x_ref", "y_ref", "theta_ref", "v_ref", "omega_ref", *POSTURE_ERROR.names,
+                   "e_tr", "v_cmd", "omega_cmd", "tau_r", "tau_l")  # fmt: skip
+
+
+def recorded_columns(result: SimResult, names: Collection[str] | None = None) -> dict[str, Any]:
+    """The recorded series of ``result`` by their column names, as they are: ``t``, the BODY state, the reference
+    (``x_ref, y_ref, v_ref, omega_ref``), the posture error, every logged channel and the plant's states beyond BODY.
+    Only those in ``names`` when given: inside a jitted batch (every array with its run axis), XLA then drops the
+    rest of the recording. :func:`finished_columns` turns them into ``timeseries.parquet``'s columns; a single run
+    and a batch's metrics both go this one way."""
+    reference = result.reference._asdict()
+    columns = {"t": result.t, **BODY.columns(result.state)}
+    columns |= {f"{name}_ref": reference[name] for name in ("x", "y", "v", "omega")}
+    columns |= POSTURE_ERROR.columns(result.error) | dict(result.logs) | dict(result.plant_state)
+    return columns if names is None else {name: value for name, value in columns.items() if name in names}
+
+
+def finished_columns(recorded: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The documented columns (docs/guide.md) from one run's :func:`recorded_columns` (float64 NumPy arrays over its
+    valid rows), computed on the host: ``theta_ref = theta + e_theta`` (continuous like theta; the reference's own
+    is wrapped), e_tr = |(e_x, e_y)|, and NaN torques where no torque was applied (a velocity-input plant).
+    Columns it cannot compute (a metrics batch keeps only what the metrics read) are left out."""
+    columns = dict(recorded)
+    nan = np.full(len(columns["t"]), np.nan)
+    if "theta" in columns and "e_theta" in columns:
+        columns["theta_ref"] = columns["theta"] + columns["e_theta"]
+    if "e_x" in columns and "e_y" in columns:
+        columns["e_tr"] = np.hypot(columns["e_x"], columns["e_y"])
+    columns |= {
+        name: columns.get(name, nan) for name in WHEEL_TORQUES.names
+    }  # named by the simulator for torque plants
+    return {name: columns.pop(name) for name in LEADING_COLUMNS if name in columns} | columns
+
+
 def timeseries(result: SimResult) -> dict[str, np.ndarray]:
     """The documented time-series columns (docs/guide.md) of the valid rows, as float64 NumPy arrays.
 
@@ -125,27 +160,6 @@ def timeseries(result: SimResult) -> dict[str, np.ndarray]:
         [m/s], [rad/s], [N m].
     """
     n = result.n_valid
-    rows = slice(0, n)
-    state = np.asarray(result.state, dtype=float)[rows]
-    error = np.asarray(result.error, dtype=float)[rows]
-    logs = {name: np.asarray(value, dtype=float)[rows] for name, value in result.logs.items()}
-    ref = {name: np.asarray(value, dtype=float)[rows] for name, value in result.reference._asdict().items()}
-    nan = np.full(n, np.nan)
-    body, posture = BODY.columns(state), POSTURE_ERROR.columns(error)
-    columns = {
-        "t": np.asarray(result.t, dtype=float)[rows],
-        **body,
-        "x_ref": ref["x"],
-        "y_ref": ref["y"],
-        "theta_ref": body["theta"] + posture["e_theta"],  # continuous like theta; the reference's own is wrapped
-        "v_ref": ref["v"],
-        "omega_ref": ref["omega"],
-        **posture,
-        "e_tr": np.hypot(posture["e_x"], posture["e_y"]),
-        # the velocity command, where one was logged or a velocity-driven plant took it; never the torques instead
-        **{name: logs.pop(name) for name in ("v_cmd", "omega_cmd") if name in logs},
-        "tau_r": logs.pop("tau_r", nan),
-        "tau_l": logs.pop("tau_l", nan),  # named by the simulator for torque plants
-    }
-    extra = {name: np.asarray(value, dtype=float)[rows] for name, value in result.plant_state.items()}
-    return columns | logs | extra
+    return finished_columns(
+        {name: np.asarray(value, dtype=float)[:n] for name, value in recorded_columns(result).items()}
+    )

@@ -13,9 +13,8 @@ from .._pytree import pytree_dataclass
 from ..geometry import posture_error
 from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
-from ..parameters import TIMING, Timing, declared
+from ..parameters import Timing, declared
 from ..precision import require_float64
-from ..trajectories import Trajectory
 from .result import SimResult
 
 SCAN_UNROLL = 2
@@ -47,6 +46,7 @@ class Draws(NamedTuple):
 
 
 DIVERGENCE_SPEED = 50.0  #: |v| [m/s] or |omega| [rad/s] beyond which a run has diverged, unless a caller says otherwise
+DIVERGENCE_ERROR = 50.0  #: the tracking error [m] beyond which a run has diverged, unless a caller says otherwise
 
 
 def plant_period(
@@ -101,7 +101,7 @@ def period_status(
     u: Array,
     error: Array,
     *,
-    divergence_error: Array | float = 50.0,
+    divergence_error: Array | float = DIVERGENCE_ERROR,
     divergence_speed: Array | float = DIVERGENCE_SPEED,
 ) -> Array:
     """The status of one control period (``STATUS_NAMES``): 2 (``non_finite``) when x_{k+1} or the held input
@@ -119,18 +119,38 @@ def period_status(
 
 @pytree_dataclass
 class ClosedLoop:
-    """One run's loop without its randomness: what a control period reads and never changes. Its :meth:`period` is
-    the one control period that :func:`simulate`'s scan and the Gymnasium environment (``ddtrack.envs``) both
-    step."""
+    """One run's loop without its randomness: the one description every simulation takes (:func:`simulate`, its
+    batched forms, the Gymnasium environment's episode). Its :meth:`period` is the one control period that
+    :func:`simulate`'s scan and the environment both step; nothing in it changes during a run.
+
+    ``ClosedLoop(plant, controller, trajectory)`` is a run with no disturbance, no noise, the declared timing and the
+    default divergence bounds; ``dataclasses.replace(loop, controller=...)`` changes one part. For a batch
+    (:func:`~ddtrack.sim.simulate_batch`) every leaf carries a leading run axis, numbers included (each run may have
+    its own control period or bound): :func:`ddtrack.sim.stack` stacks single loops.
+
+    Parameters
+    ----------
+    plant, controller, trajectory
+        pytrees following their protocols (``ddtrack.model.Plant``, ``ddtrack.controllers.Controller``,
+        ``ddtrack.trajectories.Trajectory``)
+    disturbance, noise
+        the wheel-torque disturbance and the pose-measurement noise (default: none)
+    control_period
+        T_c [s]
+    divergence_error, divergence_speed
+        thresholds of the ``diverged`` status: tracking error [m], |v| [m/s] or |omega| [rad/s]
+    substeps
+        integration steps per control period (static: part of the compiled program)
+    """
 
     plant: Any  #: a ``ddtrack.model.Plant``
     controller: Any  #: a ``ddtrack.controllers.Controller``
     trajectory: Any  #: a ``ddtrack.trajectories.Trajectory``
-    disturbance: WheelDisturbance
-    noise: MeasurementNoise
-    control_period: Array | float  #: T_c [s]
-    divergence_error: Array | float  #: [m]
-    divergence_speed: Array | float  #: [m/s] or [rad/s]
+    disturbance: WheelDisturbance = WheelDisturbance()
+    noise: MeasurementNoise = MeasurementNoise()
+    control_period: Array | float = declared(Timing)  #: T_c [s]
+    divergence_error: Array | float = DIVERGENCE_ERROR  #: [m]
+    divergence_speed: Array | float = DIVERGENCE_SPEED  #: [m/s] or [rad/s]
     substeps: int = declared(Timing)  #: integration steps per period (a loop bound: structure)
 
     def period(
@@ -169,25 +189,11 @@ class ClosedLoop:
         return x_next, next_memory, new_status, (body, ref, error, u, logs)
 
 
-@partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def simulate(
-    plant: Plant,
-    controller: Any,
-    trajectory: Trajectory,
-    x0: Array,
-    draws: Draws,
-    *,
-    n_steps: int,
-    control_period: float = TIMING.control_period,
-    substeps: int = TIMING.substeps,
-    disturbance: WheelDisturbance = WheelDisturbance(),
-    noise: MeasurementNoise = MeasurementNoise(),
-    divergence_error: float = 50.0,
-    divergence_speed: float = DIVERGENCE_SPEED,
-) -> SimResult:
-    """Simulate ``n_steps`` control periods of ``controller`` on ``plant`` tracking ``trajectory``.
+@partial(jax.jit, static_argnames=("n_steps",))
+def simulate(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimResult:
+    """Simulate ``n_steps`` control periods of ``loop``: its controller on its plant tracking its trajectory.
 
-    One control period, exactly::
+    One control period, exactly (:meth:`ClosedLoop.period`)::
 
         x_0 = plant.init(x0)
         for k in 0 .. N-1:                      t_k = k * T_c
@@ -203,30 +209,21 @@ def simulate(
             record b_k, ref_k, e_p(b_k, ref_k), u_k, logs_k | plant.logged(x_k, u_k), the other recorded states of x_k
 
     Failure is a status, never an exception: the first k with a non-finite control or next state
-    sets ``non_finite``; the first k whose tracking error exceeds ``divergence_error`` [m], or whose
-    |v| [m/s] or |omega| [rad/s] exceeds ``divergence_speed``, sets ``diverged``. From then on the
+    sets ``non_finite``; the first k whose tracking error exceeds the loop's ``divergence_error`` [m], or whose
+    |v| [m/s] or |omega| [rad/s] exceeds its ``divergence_speed``, sets ``diverged``. From then on the
     state and the controller's memory are frozen.
 
     Parameters
     ----------
-    plant, controller, trajectory
-        pytrees following their protocols (``ddtrack.model.Plant``,
-        ``ddtrack.controllers.Controller``, ``ddtrack.trajectories.Trajectory``); a controller that declares an
-        ``output_kind`` must match the plant's ``input_kind`` (a ValueError names both otherwise)
+    loop
+        plant, controller, trajectory, disturbance, noise, timing and bounds (:class:`ClosedLoop`); a controller
+        that declares an ``output_kind`` must match the plant's ``input_kind`` (a ValueError names both otherwise)
     x0
         (5,) initial BODY state [x, y, theta, v, omega], from which ``plant.init`` builds the plant's state
     draws
         the run's random draws (:class:`Draws`), shapes (n_steps, 2) and (n_steps, 5)
     n_steps
         number of control periods N (static)
-    control_period
-        T_c [s]
-    substeps
-        RK4 steps per control period (static)
-    disturbance, noise
-        the wheel-torque disturbance and the pose-measurement noise
-    divergence_error, divergence_speed
-        thresholds of the ``diverged`` status [m], [m/s or rad/s]
 
     Returns
     -------
@@ -235,13 +232,10 @@ def simulate(
         index of the failing period (-1 when none)
     """
     require_float64()
-    require_matching_input(plant, controller)
+    plant = loop.plant
+    require_matching_input(plant, loop.controller)
     x0 = plant.init(jnp.asarray(x0, dtype=float))
-    memory0 = controller.init(measured(plant, x0), trajectory(0.0), draws.controller_key)
-
-    loop = ClosedLoop(
-        plant, controller, trajectory, disturbance, noise, control_period, divergence_error, divergence_speed, substeps
-    )
+    memory0 = loop.controller.init(measured(plant, x0), loop.trajectory(0.0), draws.controller_key)
 
     def period(carry, inputs):
         x, memory, status, failure_index = carry
@@ -261,7 +255,7 @@ def simulate(
     (_, _, status, failure_index), (states, refs, errors, controls, logs, extra) = jax.lax.scan(
         period, carry0, (steps, draws.disturbance, draws.noise), unroll=SCAN_UNROLL
     )
-    return SimResult(steps * control_period, states, refs, errors, controls, logs, status, failure_index, extra)
+    return SimResult(steps * loop.control_period, states, refs, errors, controls, logs, status, failure_index, extra)
 
 
 def measured(plant: Plant, x: Array) -> Array:

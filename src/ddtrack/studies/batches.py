@@ -12,78 +12,50 @@ from functools import partial
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
 from ..compilations import bucketed_length, call_exported
-from ..controllers import Controller
-from ..layout import BODY, POSTURE_ERROR
-from ..metrics import tracking_error
-from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..model.sensed import ODOMETRY_ERROR
 from ..plausibility import traction_columns
-from ..runner import batch_runs, failure_within, loading_warnings, prepare_batch, run_length, run_metrics
+from ..runner import failure_within, loading_warnings, prepare_batch, run_length, run_metrics, simulation_args
 from ..scenario import Scenario, Setup
-from ..sim import STATUS_NAMES, Draws, simulate_batch
+from ..sim import STATUS_NAMES, ClosedLoop, Draws, simulate_batch
 from ..sim.batch import in_shares
-from ..trajectories import Trajectory
+from ..sim.result import finished_columns, recorded_columns
 from ..trajectories.switched import TrajectoryFrame
 
-#: the series metrics and warnings read
-METRIC_LOGS = ("tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate", "slip_r", "slip_l", "slip_lateral",
-               *ODOMETRY_ERROR.names)  # fmt: skip
-#: a slip plant's wheel spin speeds, at which the motor's curve is checked (:func:`traction_columns`)
-WHEEL_SPINS = ("phidot_r", "phidot_l")
+#: the recorded columns metrics and warnings read: the error, the speeds (for the grip the run needed), the logs,
+#: a slip plant's wheel spin speeds (at which the motor's curve is checked: :func:`traction_columns`)
+METRIC_COLUMNS = ("t", "e_x", "e_y", "v", "omega", "tau_r", "tau_l", "saturated", "kx", "ky", "ktheta", "gate",
+                  "slip_r", "slip_l", "slip_lateral", *ODOMETRY_ERROR.names, "phidot_r", "phidot_l")  # fmt: skip
 
 
-@partial(jax.jit, static_argnames=("n_steps", "substeps"))
-def _metric_series(
-    plant: Plant,
-    controller: Controller,
-    trajectory: Trajectory,
-    x0: Array,
-    draws: Draws,
-    disturbance: WheelDisturbance,
-    noise: MeasurementNoise,
-    divergence_error: Array,
-    **steps: int,
-) -> tuple[dict, Array, Array]:
+@partial(jax.jit, static_argnames=("n_steps",))
+def _metric_series(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> tuple[dict, Array, Array]:
     """:func:`simulate_batch` returning only the series the metrics read: XLA then drops the rest of the
     recording (states, references, controls), which nearly doubles batch throughput (docs/benchmarks.md).
-    ``divergence_error`` holds each run's bound [m], so runs of different scenarios can share the batch."""
-    result = simulate_batch(
-        plant, controller, trajectory, x0, draws, disturbance, noise, divergence_error=divergence_error, **steps
-    )
-    series = {
-        "e_xy": POSTURE_ERROR.span(result.error, "e_x", "e_y"),  # e_tr in NumPy on the host, as timeseries does
-        "v": BODY.read(result.state, "v"),
-        "omega": BODY.read(result.state, "omega"),
-    }  # for the grip the run needed
-    series |= {name: value for name, value in result.logs.items() if name in METRIC_LOGS}
-    series |= {name: value for name, value in result.plant_state.items() if name in WHEEL_SPINS}
-    return series, result.status, result.failure_index
+    Each run has its own numbers in ``loop`` (bounds, control period), so runs of different scenarios can share it."""
+    result = simulate_batch(loop, x0, draws, n_steps=n_steps)
+    return recorded_columns(result, METRIC_COLUMNS), result.status, result.failure_index
 
 
-def metric_series(scenario: Scenario, runs: tuple, divergence_error: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(series, status, failure index) of a batch of ``runs`` (:func:`batch_runs` padded to the
-    :func:`~ddtrack.runner.run_length` of ``scenario``, or several scenarios' runs of one structure joined along the
-    run axis) with the timing of ``scenario``, split over the devices (:func:`~ddtrack.sim.batch.in_shares`), as NumPy
-    arrays, over the run length: :func:`series_metrics` cuts each run to its scenario's periods."""
-    sim = scenario.simulation
-    static = {"n_steps": run_length(scenario), "substeps": sim.substeps}  # the runs' series then cut to their own
+def metric_series(runs: tuple, n_steps: int) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(series, status, failure index) of a batch of ``runs`` (:func:`~ddtrack.runner.simulation_args` padded to
+    ``n_steps``, a :func:`~ddtrack.runner.run_length`, or several scenarios' runs of one structure joined along the
+    run axis), split over the devices (:func:`~ddtrack.sim.batch.in_shares`), as NumPy arrays, over ``n_steps``
+    periods: :func:`series_metrics` cuts each run to its scenario's periods."""
 
-    def share_series(*share: Any) -> Any:  # a share of the runs and their bounds; the period traced, as in the jit
-        return call_exported("_metric_series", _metric_series, share, {"control_period": sim.control_period}, static)
+    def share_series(*share: Any) -> Any:  # a share of the runs
+        return call_exported("_metric_series", _metric_series, share, {}, {"n_steps": n_steps})
 
-    return jax.tree_util.tree_map(np.asarray, in_shares(share_series, *runs, divergence_error))
+    return jax.tree_util.tree_map(np.asarray, in_shares(share_series, *runs))
 
 
 def batch_metrics(scenario: Scenario, setup: Setup, draws: Draws) -> list[dict]:
     """The metrics (:func:`ddtrack.summarize`) of each run of a prepared batch, without keeping its time series."""
-    runs = batch_runs(setup, draws, run_length(scenario))
-    bounds = np.full(len(np.asarray(setup.x0)), scenario.divergence_distance())
-    return series_metrics(scenario, setup, *metric_series(scenario, runs, bounds))
+    length = run_length(scenario)
+    return series_metrics(scenario, setup, *metric_series(simulation_args(scenario, setup, draws, length), length))
 
 
 def series_metrics(
@@ -91,11 +63,6 @@ def series_metrics(
 ) -> list[dict]:
     """The metrics of each run of a batch from its :func:`metric_series` (the rows of ``setup``'s runs)."""
     sim = scenario.simulation
-    series = dict(series)
-    e_xy = series.pop("e_xy")
-    series["e_tr"] = tracking_error(e_xy[..., 0], e_xy[..., 1])
-    t = np.asarray(jnp.arange(sim.n_steps) * sim.control_period)  # as simulate computes it
-    no_torque = np.full(sim.n_steps, np.nan)  # a velocity-input plant has no torque series
     nmse = None if setup.identification is None else np.asarray(setup.identification.nmse)
     lost_path_error = scenario.lost_path_distance()  # the reference is every run's: sampled once
     loaded = loading_warnings(scenario)  # and what loading found (22 ms a scenario)
@@ -104,8 +71,7 @@ def series_metrics(
     for i in range(len(status)):
         k = int(failure_index[i])
         valid = slice(0, sim.n_steps if k < 0 else k + 1)
-        columns = {"t": t, "tau_r": no_torque, "tau_l": no_torque} | {name: value[i] for name, value in series.items()}
-        columns = {name: value[valid] for name, value in columns.items()}
+        columns = finished_columns({name: np.asarray(value[i][valid], dtype=float) for name, value in series.items()})
         columns |= traction_columns(
             jax.tree_util.tree_map(lambda p, i=i: np.asarray(p)[i], setup.plant_params), columns, scenario
         )
@@ -114,7 +80,7 @@ def series_metrics(
                 scenario,
                 columns,
                 status=STATUS_NAMES[int(status[i])],
-                failure_time=None if k < 0 else float(t[k]),
+                failure_time=None if k < 0 else float(series["t"][i][k]),
                 nmse=None if nmse is None else nmse[i],
                 lost_path_error=lost_path_error,
                 loaded=loaded,

@@ -3,12 +3,12 @@
 A study (a sweep, a ``bench`` suite) has cells that differ in numbers: a robot's mass or grip, a controller's gains,
 its delay, the trajectory it follows in the study's frame, its duration. Runs whose simulation program is the same
 (:func:`program_key`: the pytree structure of plant, controller, trajectory, noise and draws, each leaf's shape and
-type, the run's length rounded up to one of a few (:func:`~ddtrack.runner.run_length`), substeps and control period)
-are joined along the run axis, each with its own divergence bound, and simulated in one batched call; each cell's rows
-then become its metrics under its own scenario
-(:func:`~ddtrack.studies.batches.series_metrics`). A ledger beside JAX's persistent compilation cache
-(:func:`ddtrack.compilations.compiled_programs`) records the programs studies compiled into it, so a study says at
-its start how many programs it needs and how many the cache already holds.
+type, the run's length rounded up to one of a few (:func:`~ddtrack.runner.run_length`), the substeps) are joined
+along the run axis, each with its own numbers (divergence bound, control period), and simulated in one batched call;
+each cell's rows then become its metrics under its own scenario (:func:`~ddtrack.studies.batches.series_metrics`).
+A ledger beside JAX's persistent compilation cache (:func:`ddtrack.compilations.compiled_programs`) records the
+programs studies compiled into it, so a study says at its start how many programs it needs and how many the cache
+already holds.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 from ..compilations import compiled_programs, ledger_entry, record_compiled
-from ..runner import batch_runs, prepare_batch, run_length
+from ..runner import prepare_batch, run_length, simulation_args
 from ..scenario import Scenario, Setup
 from ..sim import Draws
 from ..trajectories.switched import TrajectoryFrame
@@ -36,13 +36,12 @@ Prepared = tuple[Scenario, Setup, Draws]  #: a cell's scenario and its runs, pre
 
 def program_key(scenario: Scenario, setup: Setup, draws: Draws) -> str:
     """What the simulation program of a prepared batch's runs depends on, as text: the runs' pytree structure (static
-    fields included), each leaf's shape without the run axis and its type, and the run's length, substeps and control
-    period (traced, but one value for a whole batch). Equal keys: the runs can share one batched call."""
+    fields, the substeps among them, included), each leaf's shape without the run axis and its type, and the run's
+    length. Equal keys: the runs can share one batched call."""
     length = run_length(scenario)
-    leaves, structure = jax.tree_util.tree_flatten(batch_runs(setup, draws, length))
+    leaves, structure = jax.tree_util.tree_flatten(simulation_args(scenario, setup, draws, length))
     shapes = [(tuple(np.shape(leaf))[1:], str(getattr(leaf, "dtype", type(leaf).__name__))) for leaf in leaves]
-    sim = scenario.simulation
-    return f"{structure} {shapes} n_steps={length} substeps={sim.substeps} period={sim.control_period!r}"
+    return f"{structure} {shapes} n_steps={length}"
 
 
 def planned_key(scenario: Scenario, frame: TrajectoryFrame | None) -> str:
@@ -91,19 +90,14 @@ def cells_rows(cells: Sequence[tuple[Prepared, Sequence[int]]], size: int) -> li
     results: list[list[dict]] = [[] for _ in cells]
     for key in dict.fromkeys(keys):
         members = [i for i, k in enumerate(keys) if k == key]
-        runs = [
-            jax.tree_util.tree_map(np.asarray, batch_runs(*cells[i][0][1:], run_length(cells[i][0][0])))
-            for i in members
-        ]
-        bounds = [np.full(len(cells[i][1]), cells[i][0][0].divergence_distance()) for i in members]
+        length = run_length(cells[members[0]][0][0])  # the same for every member: part of the key
+        runs = [jax.tree_util.tree_map(np.asarray, simulation_args(*cells[i][0], length)) for i in members]
         joined = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *runs)
-        bound = np.concatenate(bounds)
-        total, outputs = len(bound), []
+        total, outputs = sum(len(cells[i][1]) for i in members), []
         for start in range(0, total, size):
-            part, part_bound = _rows(joined, slice(start, start + size)), bound[start : start + size]
-            used = len(part_bound)
-            part, part_bound = _padded(part, size), _padded(part_bound, size)
-            outputs.append(_rows(metric_series(cells[members[0]][0][0], part, part_bound), slice(0, used)))
+            part = _rows(joined, slice(start, start + size))
+            used = min(size, total - start)
+            outputs.append(_rows(metric_series(_padded(part, size), length), slice(0, used)))
         record_compiled([ledger_entry(batch_program(key, size))])
         series = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *outputs)
         start = 0

@@ -34,7 +34,7 @@ from ..metrics import window_mask
 from ..outdir import atomic_write
 from ..runner import prepare_batch
 from ..scenario import Scenario, Setup, controller_output, tunable_kinds
-from ..sim import Draws, simulate_batch
+from ..sim import ClosedLoop, Draws, repeated, simulate_batch
 
 #: the fields of the outer law that the tuned gains replace, in the scenario's ``gains`` order; the kinds whose
 #: gains can be tuned are the registry's (:func:`ddtrack.scenario.tunable_kinds`: differentiable, Kanayama, torque)
@@ -104,19 +104,18 @@ def rollout_loss(
     outer = dataclasses.replace(
         controller.outer, **{f: jnp.broadcast_to(gains[i], (runs,)) for i, f in enumerate(fields)}
     )
-    result = simulate_batch(
-        problem.setup.plant,
+    setup = problem.setup
+    loop = ClosedLoop(
+        setup.plant,
         dataclasses.replace(controller, outer=outer),
-        problem.setup.trajectory,
-        problem.setup.x0,
-        problem.draws,
-        problem.setup.disturbance,
-        problem.setup.noise,
-        n_steps=sim.n_steps,
+        setup.trajectory,
+        setup.disturbance,
+        setup.noise,
         control_period=sim.control_period,
-        substeps=sim.substeps,
         divergence_error=problem.divergence_error,
+        substeps=sim.substeps,
     )
+    result = simulate_batch(repeated(loop, runs), setup.x0, problem.draws, n_steps=sim.n_steps)
     t = np.arange(sim.n_steps) * sim.control_period
     counted = np.ones(sim.n_steps) if whole_run else window_mask(t, sim.window).astype(float)
     per_period = 0.5 * jnp.sum(gamma * result.error**2, axis=-1) + effort_weight * jnp.sum(result.control**2, axis=-1)
