@@ -11,6 +11,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass
 from ..geometry import posture_error
+from ..integrators import RK4, Solver
 from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..parameters import TIMING, Timing, declared
@@ -58,12 +59,12 @@ def plant_period(
     *,
     disturbance: WheelDisturbance,
     control_period: Array | float,
-    substeps: int,
+    solver: Solver,
 ) -> tuple[Array, Array]:
     """Advance the plant over one control period under the held input: the simulator's own step.
 
     ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``plant.advance(x, u, d,
-    control_period, substeps)``, both held (zero-order hold; an ODE plant takes ``substeps`` RK4 steps).
+    control_period, solver)``, both held (zero-order hold; an ODE plant takes ``solver.substeps`` of its steps).
     :func:`simulate` and the Gymnasium environment (``ddtrack.envs``) both call it, so they step alike.
 
     Parameters
@@ -82,8 +83,8 @@ def plant_period(
         the wheel-torque disturbance
     control_period
         T_c [s]
-    substeps
-        integration steps per period (static under ``jit``)
+    solver
+        the :class:`~ddtrack.integrators.Solver` the plant is integrated with, e.g. ``RK4(10)`` (static under ``jit``)
 
     Returns
     -------
@@ -92,7 +93,7 @@ def plant_period(
     """
     u = plant.saturate(u)
     tau_d = disturbance.torque(t, xi_disturbance)
-    return u, plant.advance(x, u, tau_d, control_period, substeps)
+    return u, plant.advance(x, u, tau_d, control_period, solver)
 
 
 def period_status(
@@ -153,7 +154,7 @@ class ClosedLoop:
             xi_disturbance,
             disturbance=self.disturbance,
             control_period=self.control_period,
-            substeps=self.substeps,
+            solver=RK4(self.substeps),
         )
         error = posture_error(*pose(body), ref.x, ref.y, ref.theta)
         new_status = jnp.where(
