@@ -29,6 +29,7 @@ from ddtrack.controllers import (
     lyapunov,
 )
 from ddtrack.geometry import posture_error
+from ddtrack.integrators import RK4
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance, body_acceleration, wheel_speeds
 from ddtrack.sim import ClosedLoop, Draws, rk4_step, simulate
 from ddtrack.trajectories import Circle, FigureEight, Line, Reference
@@ -65,7 +66,7 @@ def run(
     disturbance=WheelDisturbance(bias=(0.0, 0.0), amplitude=(0.0, 0.0), frequency=0.0, phase=(0.0, 0.0)),
 ):
     loop = ClosedLoop(
-        DynamicPlant(plant), controller, trajectory, disturbance, control_period=control_period, substeps=substeps
+        DynamicPlant(plant), controller, trajectory, disturbance, control_period=control_period, solver=RK4(substeps)
     )
     return simulate(loop, jnp.asarray(x0, dtype=float), Draws.zeros(n), n_steps=n)
 
@@ -492,7 +493,7 @@ def test_clamps_and_saturated_log(max_torque):
         setup.disturbance,
         setup.noise,
         control_period=scenario.simulation.control_period,
-        substeps=scenario.simulation.substeps,
+        solver=RK4(scenario.simulation.substeps),
     )
     result = simulate(loop, setup.x0, draws, n_steps=n)
     assert result.status_name == "ok"

@@ -1,6 +1,7 @@
 """The fixed-step RK4 integrator: its coefficients, its measured order, and the plant integration
 cross-checked against scipy's adaptive high-order solvers (SPEC 4.1: RK4 with 1 ms sub-steps)."""
 
+from dataclasses import replace
 from functools import partial
 
 import jax
@@ -10,8 +11,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import ddtrack  # noqa: F401  (turns on float64)
-from ddtrack import pytree_dataclass
+from ddtrack import pytree_dataclass, static_field
+from ddtrack.integrators import RK4
 from ddtrack.model import DynamicPlant, RobotParams, WheelDisturbance
+from ddtrack.parameters import TIMING
 from ddtrack.sim import ClosedLoop, Draws, rk4, rk4_step, simulate
 from ddtrack.trajectories import Line
 
@@ -73,6 +76,49 @@ def test_rk4_is_repeated_rk4_step():
     for _ in range(4):
         manual = step(f, manual, 0.025)
     np.testing.assert_allclose(integrate(f, x0, 0.1, 4), manual, rtol=1e-15, atol=1e-15)  # same operations
+
+
+# --- solvers: the method a plant is advanced with, an argument beside it -------------------------
+
+
+@pytree_dataclass
+class Euler:
+    """A user's own solver: explicit Euler in ``substeps`` equal steps (first order)."""
+
+    substeps: int = static_field(default=10, why="a loop bound")
+
+    def integrate(self, f, x, duration):
+        h = duration / self.substeps
+        return jax.lax.fori_loop(0, self.substeps, lambda _, z: z + h * f(z), x)
+
+
+def test_the_rk4_solver_is_rk4_bit_for_bit():
+    plant = DynamicPlant(RobotParams(**TRUE))
+    x0, tau = jnp.array([0.5, -1.0, 0.3, 1.0, 1.5]), jnp.array([1.2, -0.8])
+    f = lambda x: plant.derivative(x, tau, jnp.asarray(TAU_D))  # noqa: E731
+    for n in (1, 7, 10):
+        assert np.array_equal(RK4(n).integrate(f, x0, 0.01), rk4(f, x0, 0.01, n))
+        assert np.array_equal(
+            jax.jit(lambda s: plant.advance(x0, tau, jnp.asarray(TAU_D), 0.01, s))(RK4(n)), integrate(f, x0, 0.01, n)
+        )
+    assert RK4().substeps == TIMING.substeps  # the declared default
+    assert replace(RK4(3), substeps=5) == RK4(5)  # the same method at another step count
+
+
+def test_a_users_solver_advances_a_plant_at_its_own_order():
+    """A solver of the user's own (explicit Euler) passed to a plant's ``advance``, through ``jit`` as a pytree:
+    its result converges to RK4's at first order, the error halving as the steps double."""
+    plant = DynamicPlant(RobotParams(**TRUE))
+    x0, tau, tau_d = jnp.array([0.5, -1.0, 0.3, 1.0, 1.5]), jnp.array([1.2, -0.8]), jnp.asarray(TAU_D)
+    advance = jax.jit(lambda solver: plant.advance(x0, tau, tau_d, 0.5, solver))
+    reference = np.asarray(advance(RK4(400)))  # its error is ~1e-13, far below Euler's
+    steps = [20, 40, 80, 160]
+    errors = [np.max(np.abs(np.asarray(advance(Euler(n))) - reference)) for n in steps]
+    assert errors[-1] > 1e-6  # truncation, far above the reference's error
+    pairwise, fitted = observed_orders(steps, errors)
+    assert np.all((pairwise > 0.9) & (pairwise < 1.1)), pairwise  # Euler: global error ~ C h
+    assert 0.9 < fitted < 1.1
+    assert np.array_equal(advance(replace(Euler(), substeps=20)), advance(Euler(20)))
 
 
 # --- measured order of convergence --------------------------------------------------------------
@@ -211,7 +257,7 @@ def test_simulator_schedule_matches_scipy(forward_drive):
         WheelDisturbance(bias=tuple(TAU_D)),
         control_period=CONTROL_PERIOD,
         divergence_error=1e9,
-        substeps=SUBSTEPS,
+        solver=RK4(SUBSTEPS),
     )
     result = simulate(loop, jnp.asarray(x0), Draws.zeros(N_PERIODS), n_steps=N_PERIODS)
     assert int(result.status) == 0

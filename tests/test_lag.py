@@ -12,6 +12,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
+from ddtrack.integrators import RK4
 from ddtrack.model import KinematicPlant
 from ddtrack.model.lag import PIONEER_3DX_ALTERNATIVE, PIONEER_3DX_WITH_LASER, LagPlant, lag_plant_model
 from ddtrack.runner import prepare, prepare_batch, run_setup
@@ -24,7 +25,7 @@ def respond(plant, command, periods, body0=(0.0, 0.0, 0.0, 0.0, 0.0)):
     u = jnp.asarray(command, dtype=float)
 
     def one(x, _):
-        x_next = plant.advance(x, plant.saturate(u), jnp.zeros(2), PERIOD, SUBSTEPS)
+        x_next = plant.advance(x, plant.saturate(u), jnp.zeros(2), PERIOD, RK4(SUBSTEPS))
         return x_next, x_next
 
     x0 = plant.init(jnp.asarray(body0, dtype=float))
@@ -92,8 +93,8 @@ def test_speed_limits_clip_the_command_and_default_to_none():
 def test_disturbance_torques_do_not_move_it():
     plant, x = LagPlant(PIONEER_3DX_WITH_LASER), jnp.asarray([0.1, 0.2, 0.3, 0.4, 0.5])
     u = jnp.asarray([0.3, -0.2])
-    with_torque = plant.advance(x, u, jnp.asarray([5.0, -5.0]), PERIOD, SUBSTEPS)
-    assert np.array_equal(with_torque, plant.advance(x, u, jnp.zeros(2), PERIOD, SUBSTEPS))
+    with_torque = plant.advance(x, u, jnp.asarray([5.0, -5.0]), PERIOD, RK4(SUBSTEPS))
+    assert np.array_equal(with_torque, plant.advance(x, u, jnp.zeros(2), PERIOD, RK4(SUBSTEPS)))
 
 
 # --- through the runner --------------------------------------------------------------------------------------------
@@ -118,7 +119,7 @@ def test_a_velocity_controller_drives_the_lag_plant_through_run_setup():
     assert result.status_name == "ok"
     state, control = np.asarray(result.state), np.asarray(result.control)
     sim = scenario.simulation
-    replay = jax.vmap(lambda x, u: plant.advance(x, u, jnp.zeros(2), sim.control_period, sim.substeps))
+    replay = jax.vmap(lambda x, u: plant.advance(x, u, jnp.zeros(2), sim.control_period, RK4(sim.substeps)))
     np.testing.assert_allclose(replay(state[:-1], control[:-1]), state[1:], rtol=0, atol=1e-12)
     # the ideal unicycle takes each command at once; the lag plant does not
     np.testing.assert_allclose(np.asarray(ideal.state)[1:, 3:], np.asarray(ideal.control)[:-1], atol=1e-12)

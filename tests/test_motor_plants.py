@@ -14,6 +14,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
+from ddtrack.integrators import RK4
 from ddtrack.model import (
     DCMotor,
     DynamicPlant,
@@ -38,7 +39,7 @@ def respond(plant, command, periods, body0=(0.0, 0.0, 0.0, 0.0, 0.0)):
     u = plant.saturate(jnp.asarray(command, dtype=float))
 
     def one(x, _):
-        x_next = plant.advance(x, u, jnp.zeros(2), PERIOD, SUBSTEPS)
+        x_next = plant.advance(x, u, jnp.zeros(2), PERIOD, RK4(SUBSTEPS))
         return x_next, x_next
 
     x0 = plant.init(jnp.asarray(body0, dtype=float))
@@ -226,7 +227,7 @@ def test_init_holds_the_initial_speed():
     np.testing.assert_allclose(states[:, 3:], np.broadcast_to(states[0, 3:], states[:, 3:].shape), atol=1e-12)
     assert np.all(plant.init(jnp.zeros(5))[5:] == 0.0)
     cold = jnp.concatenate([jnp.asarray(body0), jnp.zeros(2)])
-    braked = plant.advance(cold, jnp.asarray(body0[3:]), jnp.zeros(2), PERIOD, SUBSTEPS)
+    braked = plant.advance(cold, jnp.asarray(body0[3:]), jnp.zeros(2), PERIOD, RK4(SUBSTEPS))
     assert float(braked[3]) < 0.1 - 1e-3
 
 
@@ -256,7 +257,7 @@ def test_a_velocity_controller_drives_it_through_run_setup():
     state = np.column_stack([np.asarray(result.state), *(np.asarray(result.plant_state[n]) for n in ("pi_r", "pi_l"))])
     control, sim = np.asarray(result.control), scenario.simulation
     disturbance = jax.vmap(lambda t: setup.disturbance.torque(t, jnp.zeros(2)))(result.t[:-1])  # no Gaussian part
-    replay = jax.vmap(lambda x, u, d: plant.advance(x, u, d, sim.control_period, sim.substeps))
+    replay = jax.vmap(lambda x, u, d: plant.advance(x, u, d, sim.control_period, RK4(sim.substeps)))
     np.testing.assert_allclose(replay(state[:-1], control[:-1], disturbance), state[1:], rtol=0, atol=1e-10)
     assert np.max(np.abs(state[1:, 3:5] - control[:-1])) > 1e-3  # the loop lags the command
     columns = ddtrack.timeseries(result)

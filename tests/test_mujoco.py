@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 from mujoco_model import GRAVITY, MujocoRobot, compared_params
 
+from ddtrack.integrators import RK4
 from ddtrack.model import DynamicPlant, RobotParams, slip_plant, traction
 from ddtrack.robots import preset
 
@@ -55,7 +56,7 @@ def ddtrack_run(params: RobotParams, torques: np.ndarray) -> np.ndarray:
     plant = DynamicPlant(params)
 
     def period(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
-        return plant.advance(x, u, jnp.zeros(2), PERIOD, 10), x
+        return plant.advance(x, u, jnp.zeros(2), PERIOD, RK4(10)), x
 
     last, states = jax.lax.scan(period, jnp.zeros(5), jnp.asarray(torques))
     return np.vstack([np.asarray(states), np.asarray(last)[None]])
@@ -238,10 +239,10 @@ def slip_states(params: RobotParams, caster: float, torque: float, duration: flo
     """ddtrack's :class:`~ddtrack.model.SlipPlant` states (:data:`~ddtrack.model.slip.SLIP_STATE`) each period
     from rest under ``torque`` [N m] on both wheels, on the floor of mu = ``FLOOR`` with a slip speed of 1 mm/s."""
     plant = slip_plant(params, friction=FLOOR, slip_speed=1e-3, caster=caster, period=PERIOD, substeps=20)
-    steps = plant.substeps
+    solver = RK4(int(plant.substeps))
 
     def period(x: jax.Array, u: jax.Array) -> tuple[jax.Array, jax.Array]:
-        return plant.advance(x, u, jnp.zeros(2), PERIOD, steps), x
+        return plant.advance(x, u, jnp.zeros(2), PERIOD, solver), x
 
     torques = jnp.full((round(duration / PERIOD), 2), torque)
     last, states = jax.lax.scan(period, plant.init(jnp.zeros(5)), torques)

@@ -130,14 +130,14 @@ def test_disturbance_defaults_are_the_declarations():
 
 def test_timing_is_declared_once():
     """The control period and the substeps default once: the ``[simulation]`` keys, the closed loop, every runtime
-    part that samples time, and the simulator's and the identification run's keyword defaults."""
+    part that samples time, the simulator's solver and the identification run's keyword defaults."""
     import inspect
 
     from ddtrack.controllers import NNAdaptiveParameters
     from ddtrack.identification import identify
+    from ddtrack.integrators import RK4
     from ddtrack.parameters import TIMING, Timing
     from ddtrack.scenario import SimulationConfig
-    from ddtrack.sim import simulate
 
     assert issubclass(SimulationConfig, Timing) and is_structure(SimulationConfig, "substeps")
     from ddtrack.model.slip import slip_plant_model
@@ -151,11 +151,11 @@ def test_timing_is_declared_once():
                 assert declaration(cls, field.name) == (Timing, field.name), f"{cls.__name__}.{field.name}"
                 timed.append(cls.__name__)
     assert {"WheelPD", "MPPI", "LTVUnicycleLQR", "AdaptiveDynamicCompensator", "Sensing"} <= set(timed), timed
-    assert declaration(ClosedLoop, "substeps") == (Timing, "substeps")
-    for function in (simulate, identify):
-        defaults = inspect.signature(function).parameters
-        assert defaults["control_period"].default == TIMING.control_period == 0.01
-        assert defaults["substeps"].default == TIMING.substeps == 10
+    assert declaration(ClosedLoop, "control_period") == (Timing, "control_period")
+    assert declaration(RK4, "substeps") == (Timing, "substeps") and ClosedLoop(None, None, None).solver == RK4()
+    defaults = inspect.signature(identify).parameters
+    assert defaults["control_period"].default == TIMING.control_period == 0.01
+    assert defaults["substeps"].default == TIMING.substeps == 10
     defaults = inspect.signature(identify).parameters  # and the NN-adaptive law's identification run's own
     for argument, declared_name in [
         ("duration", "identification_duration"),

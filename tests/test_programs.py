@@ -148,6 +148,7 @@ def test_only_a_structure_its_key_can_name_is_exported():
     never exported, two static values give two keys, and numbers (leaves) give one."""
     from ddtrack._pytree import pytree_dataclass
     from ddtrack.compilations import _structure_text
+    from ddtrack.integrators import RK4
     from ddtrack.sim.simulate import ClosedLoop
 
     @pytree_dataclass
@@ -158,7 +159,7 @@ def test_only_a_structure_its_key_can_name_is_exported():
         return _structure_text(jax.tree_util.tree_structure(value))
 
     def loop(substeps):
-        return ClosedLoop(None, None, None, control_period=0.01, divergence_error=1.0, substeps=substeps)
+        return ClosedLoop(None, None, None, control_period=0.01, divergence_error=1.0, solver=RK4(substeps))
 
     assert "ClosedLoop" in text(loop(10)) and "WheelDisturbance" in text((loop(10), 1.0))
     assert text(loop(10)) != text(loop(20))  # a static value: another program

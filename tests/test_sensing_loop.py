@@ -18,6 +18,7 @@ from conftest import SCENARIOS
 import ddtrack
 from ddtrack import pytree_dataclass
 from ddtrack.errors import ConfigError
+from ddtrack.integrators import RK4
 from ddtrack.layout import BODY, Layout
 from ddtrack.model import DynamicPlant, KinematicPlant, RobotParams, SensedPlant, Sensing, wheel_speeds
 from ddtrack.model.sensing import QUEUE_BUCKET
@@ -215,8 +216,8 @@ def test_odometry_on_a_plant_with_its_own_integrator_follows_the_same_wheels():
         def saturate(self, u):
             return self.inner.saturate(u)
 
-        def advance(self, x, u, d, period, substeps):
-            return self.inner.advance(x, u, d, period, substeps)
+        def advance(self, x, u, d, period, solver):
+            return self.inner.advance(x, u, d, period, solver)
 
         def observe(self, x):
             return x
@@ -387,7 +388,7 @@ def test_a_delay_given_directly_gets_a_queue_that_holds_it():
     for k in range(4):  # period k sends (k + 1, k + 1); what acts was sent 2 periods before (the queue starts at 0)
         u = jnp.full(2, k + 1.0)
         acting.append(float(plant.stretches(x, u)[1][0][0][0]))
-        x = plant.advance(x, u, jnp.zeros(2), T, 2)
+        x = plant.advance(x, u, jnp.zeros(2), T, RK4(2))
     assert acting == [0.0, 0.0, 1.0, 2.0]
     with pytest.raises(ValueError, match="cannot hold a delay of 3 periods"):
         SensedPlant(DynamicPlant(PARAMS), 0.033, 0.08, 0.033, 0.08, command_periods=3, queue_capacity=2)

@@ -12,6 +12,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
+from ddtrack.integrators import RK4
 from ddtrack.model import DynamicPlant, RobotParams, SlipPlant, slip_plant, slip_plant_model
 from ddtrack.model.slip import GRAVITY, choose_integration, contact_stiffness
 from ddtrack.model.traction import contact_forces
@@ -28,7 +29,7 @@ def rollout(plant, x0, torques, substeps):
     """The plant's states after each period under the held wheel torques ``torques`` (n, 2), no disturbance."""
 
     def period(x, tau):
-        x_next = plant.advance(x, plant.saturate(tau), jnp.zeros(2), PERIOD, substeps)
+        x_next = plant.advance(x, plant.saturate(tau), jnp.zeros(2), PERIOD, RK4(substeps))
         return x_next, x_next
 
     return jax.lax.scan(period, x0, torques)[1]

@@ -12,6 +12,7 @@ import pytest
 from conftest import SCENARIOS
 
 import ddtrack
+from ddtrack.integrators import RK4
 from ddtrack.model import RobotParams, VelocityDriver, motor_from_datasheet
 from ddtrack.model.slip import GRAVITY, load_fraction
 from ddtrack.model.slip_velocity import SlipVelocityPlant, slip_velocity_model
@@ -84,7 +85,7 @@ def step_response(driver: VelocityDriver, command: float, periods: int = 50, per
     u = jnp.asarray([command, 0.0])
 
     def one(x, _):
-        x_next = plant.advance(x, u, jnp.zeros(2), period, int(plant.substeps))
+        x_next = plant.advance(x, u, jnp.zeros(2), period, RK4(int(plant.substeps)))
         return x_next, x_next
 
     x0 = plant.init(jnp.zeros(5))

@@ -21,6 +21,7 @@ from ._pytree import FloatVector
 from .controllers import Backstepping, Cascade, Dithered, Emulator, NNAdaptiveParameters, VelocityOutput
 from .controllers.nn import backprop, forward, momentum_step, sample_loss, zeros_like
 from .geometry import body_increment
+from .integrators import RK4
 from .layout import BODY
 from .model import DynamicPlant, MeasurementNoise, Plant, RobotParams, WheelDisturbance
 from .parameters import TIMING
@@ -108,7 +109,7 @@ def collect(
         disturbance,
         noise,
         control_period=control_period,
-        substeps=substeps,
+        solver=RK4(substeps),
     )
     result = simulate(loop, x0, draws, n_steps=n)
     nu_c = jnp.stack([result.logs["v_cmd"], result.logs["omega_cmd"]], axis=1)

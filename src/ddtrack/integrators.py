@@ -1,12 +1,17 @@
-"""Fixed-step integration, low enough that plants, references, the simulator and model-based controllers share it."""
+"""Fixed-step integration, low enough that plants, references, the simulator and model-based controllers share it;
+:class:`Solver`, the method a plant is advanced with (an argument of ``plant.advance``, as diffrax's solver is)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, ClassVar, Protocol
 
 import jax
 import jax.numpy as jnp
 from jax import Array, lax
+
+from ._pytree import pytree_dataclass
+from .parameters import Timing, declared
 
 
 def rk4_step_timed(f: Callable[[Array | float, Array], Array], t: Array | float, x: Array, h: Array | float) -> Array:
@@ -28,6 +33,38 @@ def rk4(f: Callable[[Array], Array], x: Array, duration: Array | float, steps: i
     ``while_loop`` (one program for every count; forward-mode differentiable only), a Python int a ``scan``."""
     h = duration / steps
     return lax.fori_loop(0, steps, lambda _, z: rk4_step(f, z, h), x)
+
+
+class Solver(Protocol):
+    """A fixed-step method for x_dot = f(x) in ``substeps`` equal steps, which ``plant.advance`` integrates with.
+
+    A solver is a dataclass (a :func:`~ddtrack._pytree.pytree_dataclass` whose ``substeps`` is a static field), so
+    ``dataclasses.replace(solver, substeps=n)`` is the same method at ``n`` steps: the sensing chain shares a period's
+    steps between its pieces this way, and a slip plant raises them to its own floor, there a traced integer (its
+    ``integrate`` must take a traced count as a loop bound, as ``lax.fori_loop`` does).
+    """
+
+    __dataclass_fields__: ClassVar[dict[str, Any]]  # a dataclass: dataclasses.replace gives another step count
+
+    @property
+    def substeps(self) -> int:
+        """Steps per call: a loop bound, so structure (part of the jit key)."""
+        ...
+
+    def integrate(self, f: Callable[[Array], Array], x: Array, duration: Array | float) -> Array:
+        """The state ``duration`` [s] after ``x`` under x_dot = ``f(x)``, in ``substeps`` equal steps."""
+        ...
+
+
+@pytree_dataclass
+class RK4:
+    """Classical RK4 in ``substeps`` equal steps (:func:`rk4`): the :class:`Solver` the simulator passes plants."""
+
+    substeps: int = declared(Timing)  # Timing.substeps (10), static: the loop bound
+
+    def integrate(self, f: Callable[[Array], Array], x: Array, duration: Array | float) -> Array:
+        """:func:`rk4` over ``duration`` [s] in ``substeps`` steps (the same bits)."""
+        return rk4(f, x, duration, self.substeps)
 
 
 def semi_implicit_euler_step(

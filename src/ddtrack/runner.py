@@ -24,6 +24,7 @@ from .compilations import bucketed_length, call_exported, padded_length
 from .compilations import enable_compilation_cache as enable_compilation_cache  # its home before
 from .controllers import Emulator, TorqueLaw
 from .identification import Identification, identify
+from .integrators import RK4
 from .layout import BODY, WHEEL_TORQUES
 from .metrics import lost_path_warnings, summarize
 from .model import MeasurementNoise, RobotParams, WheelDisturbance
@@ -386,7 +387,7 @@ def closed_loop(scenario: Scenario, setup: Setup) -> ClosedLoop:
         setup.noise,
         control_period=sim.control_period,
         divergence_error=scenario.divergence_distance(),
-        substeps=sim.substeps,
+        solver=RK4(sim.substeps),
     )
     x0 = np.asarray(setup.x0)
     return loop if x0.ndim == 1 else repeated(loop, len(x0))

@@ -82,6 +82,7 @@ from .._pytree import pytree_dataclass
 from ..controllers import NNAdaptiveParameters
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
+from ..integrators import RK4
 from ..layout import BODY, Layout, pose, velocity
 from ..precision import enable_float64
 from ..runner import prepare
@@ -351,7 +352,7 @@ class DiffDriveTrackingEnv(gymnasium.Env):
                 setup.noise,
                 control_period=jnp.asarray(c["control_period"]),
                 divergence_error=jnp.asarray(c["divergence_error"]),
-                substeps=self.scenario.simulation.substeps,
+                solver=RK4(self.scenario.simulation.substeps),
             ),
             xi_disturbance=draws.disturbance,
             xi_noise=draws.noise,

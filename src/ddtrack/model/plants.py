@@ -4,13 +4,14 @@ A plant is a pytree with four pure steps::
 
     x  = plant.init(body0)                 its state from the initial pose and velocity, BODY [x, y, theta, v, omega]
     u  = plant.saturate(u)                 the actuator limits
-    x' = plant.advance(x, u, d, T, n)      one control period under the held input u and wheel disturbance d
+    x' = plant.advance(x, u, d, T, solver) one control period under the held input u and wheel disturbance d
     y  = plant.observe(x)                  what its sensors report, as a BODY vector (before noise)
 
 and its layouts: ``state_layout``, ``input_layout`` (whose kind a controller's output must match) and
-``logged_layout`` with :meth:`Plant.logged`, the channels it records each period. :class:`ODEPlant` is the
-implementation for a plant given as an ODE (``hold`` and ``derivative``), advanced by ``n`` RK4 steps; a plant with
-stiff parts brings its own ``advance``.
+``logged_layout`` with :meth:`Plant.logged`, the channels it records each period. The plant is the term, the
+``solver`` (:class:`~ddtrack.integrators.Solver`, e.g. ``RK4(10)``) the method and step count it is integrated
+with. :class:`ODEPlant` is the implementation for a plant given as an ODE (``hold`` and ``derivative``), advanced by
+``solver.integrate``; a plant with stiff parts brings its own ``advance``.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass
-from ..integrators import rk4
+from ..integrators import Solver
 from ..layout import BODY, NOTHING, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from .dynamics import body_acceleration, pose_rate
 from .params import RobotParams
@@ -49,9 +50,9 @@ class Plant(Protocol):
         """``u`` within the actuator limits (e.g. |tau| <= max_torque [N m])."""
         ...
 
-    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, solver: Solver) -> Array:
         """The state one ``period`` [s] later under the held input ``u`` and wheel disturbance torques ``tau_dist``
-        (2,) [N m] (model.md §1.3); ``substeps`` integration steps (static)."""
+        (2,) [N m] (model.md §1.3), integrated by ``solver`` (its method in its ``substeps`` steps, static)."""
         ...
 
     def observe(self, x: Array) -> Array:
@@ -64,7 +65,7 @@ class Plant(Protocol):
 
 
 class ODEPlant:
-    """A plant given as x_dot = ``derivative(x, u, d)`` from ``hold(x, u)``, advanced by RK4 (model.md §2.7).
+    """A plant given as x_dot = ``derivative(x, u, d)`` from ``hold(x, u)``, advanced by the solver (model.md §2.7).
 
     The default state is :data:`~ddtrack.layout.BODY` itself; a subclass with more states overrides ``init`` and
     ``observe`` with its ``state_layout``.
@@ -88,8 +89,8 @@ class ODEPlant:
     def init(self, body: Array) -> Array:
         return body
 
-    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
-        return rk4(lambda z: self.derivative(z, u, tau_dist), self.hold(x, u), period, substeps)
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, solver: Solver) -> Array:
+        return solver.integrate(lambda z: self.derivative(z, u, tau_dist), self.hold(x, u), period)
 
     def observe(self, x: Array) -> Array:
         return x

@@ -20,7 +20,7 @@ instead of the wheels' difference, as a TurtleBot3 does with ``use_imu``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import jax
@@ -30,7 +30,7 @@ from jax import Array
 from pydantic import Field
 
 from .._pytree import pytree_dataclass, static_field
-from ..integrators import rk4
+from ..integrators import Solver
 from ..layout import BODY, Layout, pose_vector, velocity
 from ..parameters import NonNegative, Parameters, Structure, Timing, declared, declared_fields
 from .plants import ODEPlant
@@ -261,7 +261,7 @@ class SensedPlant:
             return line[1:], [(line[latest - 1], self.command_fraction), (line[latest], 1.0 - self.command_fraction)]
         return line[1:], [(line[latest], 1.0)]
 
-    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, solver: Solver) -> Array:
         """One control period: the queued commands drive the inner plant (the wheels turning with it), then the
         odometry adds the period's encoder increments, and the measurement line takes this period's reading."""
         inner, phi, estimate, _, delayed = self.split(x)
@@ -269,11 +269,11 @@ class SensedPlant:
         inner_next, phi_next = inner, phi
         done = 0
         for i, (command, share) in enumerate(acting):
-            # the substeps shared by the stretches in proportion, at least one each
-            steps = substeps - done if i == len(acting) - 1 else max(1, round(substeps * share))
-            steps = max(1, steps)
+            n = solver.substeps  # shared by the stretches in proportion, at least one each
+            steps = max(1, n - done if i == len(acting) - 1 else round(n * share))
             done += steps
-            inner_next, phi_next = self._drive(inner_next, phi_next, command, tau_dist, share * period, steps)
+            piece = replace(solver, substeps=steps)
+            inner_next, phi_next = self._drive(inner_next, phi_next, command, tau_dist, share * period, piece)
         parts = [inner_next]
         if self.odometry:
             if self.own_angles:
@@ -354,26 +354,28 @@ class SensedPlant:
         return jnp.stack([v + self.true_half_axle * omega, v - self.true_half_axle * omega]) / self.true_radius
 
     def _drive(
-        self, inner: Array, phi: Array, u: Array, tau_dist: Array, duration: Array | float, steps: int
+        self, inner: Array, phi: Array, u: Array, tau_dist: Array, duration: Array | float, solver: Solver
     ) -> tuple[Array, Array]:
         """The inner state and the wheel angles ``duration`` [s] later under the held command ``u``."""
         if not self.odometry or self.own_angles:  # no angles to integrate, or the plant integrates its own
-            return self.inner.advance(inner, u, tau_dist, duration, steps), phi
+            return self.inner.advance(inner, u, tau_dist, duration, solver), phi
         plant = self.inner
         if isinstance(plant, ODEPlant) and type(plant).advance is ODEPlant.advance:
-            # an ODE plant: the wheel angles integrate with its state, in the same RK4 steps
+            # an ODE plant: the wheel angles integrate with its state, in the same solver steps
             size = len(inner)
 
             def rates(z: Array) -> Array:
                 return jnp.concatenate([plant.derivative(z[:size], u, tau_dist), self.wheel_rates(z[:size])])
 
-            z = rk4(rates, jnp.concatenate([plant.hold(inner, u), phi]), duration, steps)
+            z = solver.integrate(rates, jnp.concatenate([plant.hold(inner, u), phi]), duration)
             return z[:size], z[size:]
 
         # a plant with its own integrator: its steps one at a time, the angles by the trapezoid rule over each
+        steps, single = solver.substeps, replace(solver, substeps=1)
+
         def step(_: Any, carry: tuple[Array, Array]) -> tuple[Array, Array]:
             state, angles = carry
-            after = plant.advance(state, u, tau_dist, duration / steps, 1)
+            after = plant.advance(state, u, tau_dist, duration / steps, single)
             return after, angles + 0.5 * duration / steps * (self.wheel_rates(state) + self.wheel_rates(after))
 
         return jax.lax.fori_loop(0, steps, step, (inner, phi))

@@ -131,8 +131,8 @@ def actuation_push(delay: ActuationDelay, command: Array) -> tuple[ActuationDela
         ``fraction`` T_c of the period, ``later`` (the command of period j - k) for the remaining (1 - fraction)
         T_c. A plant period under the delay is two held stretches, e.g.::
 
-            x = plant.advance(x, earlier, d, fraction * T_c, n)
-            x = plant.advance(x, later, d, (1 - fraction) * T_c, n)
+            x = plant.advance(x, earlier, d, fraction * T_c, solver)
+            x = plant.advance(x, later, d, (1 - fraction) * T_c, solver)
 
         (with fraction = 0 the first stretch is empty and ``later`` is the command of period j - k).
     """

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from functools import partial
 from typing import Any, ClassVar
 
@@ -39,7 +40,7 @@ import numpy as np
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
-from ..integrators import rk4, rosenbrock2
+from ..integrators import Solver, rosenbrock2
 from ..layout import WHEEL_TORQUES, Layout, pose_vector, velocity
 from ..parameters import TIMING
 from .dynamics import wheel_friction
@@ -116,7 +117,7 @@ class SlipPlant:
         ``"rk4"`` or ``"rosenbrock"`` (static).
     substeps : int or Array
         Sub-steps per control period at least (a number, traced: robots and floors that need different counts share
-        one compiled program); the simulator's count is used when larger.
+        one compiled program); the solver's count is used when larger.
     """
 
     params: RobotParams
@@ -213,16 +214,17 @@ class SlipPlant:
         pose_dot = jnp.stack([fwd * c - lat * s, fwd * s + lat * c, r])
         return jnp.concatenate([pose_dot, jnp.stack([u_dot, w_dot, r_dot]), spin_dot])
 
-    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
-        """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
-        steps = jnp.maximum(substeps, self.substeps)
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, solver: Solver) -> Array:
+        """The state one ``period`` [s] later in max(``solver.substeps``, its own) steps (traced): by the solver's
+        method where the plant's scheme is explicit, by ROS2 where it is ``"rosenbrock"`` (stiff)."""
+        steps = jnp.maximum(solver.substeps, self.substeps)
 
         def rate(z: Array) -> Array:
             return self.derivative(z, u, tau_dist)
 
         if self.scheme == "rosenbrock":  # implicit in the velocities and spins only: the pose is not stiff
             return rosenbrock2(rate, x, period, steps, stiff=(3, 8))
-        return rk4(rate, x, period, steps)
+        return replace(solver, substeps=steps).integrate(rate, x, period)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """Applied torques, slip speeds, the floor's forces and the wheels' loads at the start of the period

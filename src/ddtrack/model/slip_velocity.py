@@ -9,13 +9,14 @@ body's speed; on a slippery one it is not, and the loop holds the wheels' spin w
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import ClassVar
 
 import jax.numpy as jnp
 from jax import Array
 
 from .._pytree import pytree_dataclass, static_field
-from ..integrators import rk4, rosenbrock2
+from ..integrators import Solver, rosenbrock2
 from ..layout import VELOCITY_COMMAND, Layout, velocity
 from ..parameters import TIMING
 from .dynamics import wheel_speeds
@@ -95,16 +96,17 @@ class SlipVelocityPlant:
         integral_rate = self.driver.integral_rate(x[_SLIP:], wheel_speeds(self.params, u), wheel_spins(x))
         return jnp.concatenate([self.slip.derivative(x[:_SLIP], tau, tau_dist), integral_rate])
 
-    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, substeps: int) -> Array:
-        """The state one ``period`` [s] later by the plant's scheme in max(``substeps``, its own) steps."""
-        steps = jnp.maximum(substeps, self.substeps)
+    def advance(self, x: Array, u: Array, tau_dist: Array, period: Array | float, solver: Solver) -> Array:
+        """The state one ``period`` [s] later in max(``solver.substeps``, its own) steps (traced): by the solver's
+        method where the plant's scheme is explicit, by ROS2 where it is ``"rosenbrock"`` (stiff)."""
+        steps = jnp.maximum(solver.substeps, self.substeps)
 
         def rate(z: Array) -> Array:
             return self.derivative(z, u, tau_dist)
 
         if self.scheme == "rosenbrock":  # the integrals' own mode is slow (k_i / (k_p + k_e)): stepped explicitly
             return rosenbrock2(rate, x, period, steps, stiff=(3, _SLIP))
-        return rk4(rate, x, period, steps)
+        return replace(solver, substeps=steps).integrate(rate, x, period)
 
     def logged(self, x: Array, u: Array) -> dict[str, Array]:
         """Applied torques, currents, slip speeds and the floor's forces at the start of the period."""

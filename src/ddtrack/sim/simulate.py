@@ -11,6 +11,7 @@ from jax import Array
 
 from .._pytree import pytree_dataclass
 from ..geometry import posture_error
+from ..integrators import RK4, Solver
 from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
 from ..model import MeasurementNoise, Plant, WheelDisturbance
 from ..parameters import Timing, declared
@@ -58,12 +59,12 @@ def plant_period(
     *,
     disturbance: WheelDisturbance,
     control_period: Array | float,
-    substeps: int,
+    solver: Solver,
 ) -> tuple[Array, Array]:
     """Advance the plant over one control period under the held input: the simulator's own step.
 
     ``u = plant.saturate(u)``; ``d = disturbance.torque(t, xi_disturbance)``; then ``plant.advance(x, u, d,
-    control_period, substeps)``, both held (zero-order hold; an ODE plant takes ``substeps`` RK4 steps).
+    control_period, solver)``, both held (zero-order hold; an ODE plant takes ``solver.substeps`` of its steps).
     :func:`simulate` and the Gymnasium environment (``ddtrack.envs``) both call it, so they step alike.
 
     Parameters
@@ -82,8 +83,8 @@ def plant_period(
         the wheel-torque disturbance
     control_period
         T_c [s]
-    substeps
-        integration steps per period (static under ``jit``)
+    solver
+        the :class:`~ddtrack.integrators.Solver` the plant is integrated with, e.g. ``RK4(10)`` (static under ``jit``)
 
     Returns
     -------
@@ -92,7 +93,7 @@ def plant_period(
     """
     u = plant.saturate(u)
     tau_d = disturbance.torque(t, xi_disturbance)
-    return u, plant.advance(x, u, tau_d, control_period, substeps)
+    return u, plant.advance(x, u, tau_d, control_period, solver)
 
 
 def period_status(
@@ -123,10 +124,11 @@ class ClosedLoop:
     batched forms, the Gymnasium environment's episode). Its :meth:`period` is the one control period that
     :func:`simulate`'s scan and the environment both step; nothing in it changes during a run.
 
-    ``ClosedLoop(plant, controller, trajectory)`` is a run with no disturbance, no noise, the declared timing and the
-    default divergence bounds; ``dataclasses.replace(loop, controller=...)`` changes one part. For a batch
-    (:func:`~ddtrack.sim.simulate_batch`) every leaf carries a leading run axis, numbers included (each run may have
-    its own control period or bound): :func:`ddtrack.sim.stack` stacks single loops.
+    ``ClosedLoop(plant, controller, trajectory)`` is a run with no disturbance, no noise, the declared timing (RK4 in
+    10 steps a period) and the default divergence bounds; ``dataclasses.replace(loop, controller=...)`` changes one
+    part. For a batch (:func:`~ddtrack.sim.simulate_batch`) every leaf carries a leading run axis, numbers included
+    (each run may have its own control period or bound): :func:`ddtrack.sim.stack` stacks single loops, and
+    :func:`ddtrack.sim.repeated` repeats one loop's numbers over an already stacked batch.
 
     Parameters
     ----------
@@ -139,8 +141,9 @@ class ClosedLoop:
         T_c [s]
     divergence_error, divergence_speed
         thresholds of the ``diverged`` status: tracking error [m], |v| [m/s] or |omega| [rad/s]
-    substeps
-        integration steps per control period (static: part of the compiled program)
+    solver
+        how the plant is integrated over a period (:class:`~ddtrack.integrators.Solver`; default
+        ``RK4(simulation.substeps)``, 10 steps): its class and step count are part of the compiled program
     """
 
     plant: Any  #: a ``ddtrack.model.Plant``
@@ -151,7 +154,7 @@ class ClosedLoop:
     control_period: Array | float = declared(Timing)  #: T_c [s]
     divergence_error: Array | float = DIVERGENCE_ERROR  #: [m]
     divergence_speed: Array | float = DIVERGENCE_SPEED  #: [m/s] or [rad/s]
-    substeps: int = declared(Timing)  #: integration steps per period (a loop bound: structure)
+    solver: Solver = RK4()  #: how the plant is integrated over a period (its step count: structure)
 
     def period(
         self, x: Array, memory: Any, status: Array, k: Array, xi_disturbance: Array, xi_noise: Array
@@ -173,7 +176,7 @@ class ClosedLoop:
             xi_disturbance,
             disturbance=self.disturbance,
             control_period=self.control_period,
-            substeps=self.substeps,
+            solver=self.solver,
         )
         error = posture_error(*pose(body), ref.x, ref.y, ref.theta)
         new_status = jnp.where(
@@ -204,7 +207,7 @@ def simulate(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimR
             u_k, x_{k+1} = plant_period(plant, x_k, u_k, t_k, draw_k):
                 u_k      = plant.saturate(u_k)
                 d_k      = disturbance(t_k, draw_k)
-                x_{k+1}  = plant.advance(x_k, u_k, d_k, T_c, substeps)
+                x_{k+1}  = plant.advance(x_k, u_k, d_k, T_c, solver)
             status_k   = period_status(b_k, x_{k+1}, u_k, e_p(b_k, ref_k))
             record b_k, ref_k, e_p(b_k, ref_k), u_k, logs_k | plant.logged(x_k, u_k), the other recorded states of x_k
 

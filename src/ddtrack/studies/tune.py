@@ -30,6 +30,7 @@ import numpy as np
 import tomli_w
 
 from ..errors import ConfigError
+from ..integrators import RK4
 from ..metrics import window_mask
 from ..outdir import atomic_write
 from ..runner import prepare_batch
@@ -113,7 +114,7 @@ def rollout_loss(
         setup.noise,
         control_period=sim.control_period,
         divergence_error=problem.divergence_error,
-        substeps=sim.substeps,
+        solver=RK4(sim.substeps),
     )
     result = simulate_batch(repeated(loop, runs), setup.x0, problem.draws, n_steps=sim.n_steps)
     t = np.arange(sim.n_steps) * sim.control_period
