@@ -130,17 +130,24 @@ class ClosedLoop:
     (each run may have its own control period or bound): :func:`ddtrack.sim.stack` stacks single loops, and
     :func:`ddtrack.sim.repeated` repeats one loop's numbers over an already stacked batch.
 
-    Parameters
+    Attributes
     ----------
-    plant, controller, trajectory
-        pytrees following their protocols (``ddtrack.model.Plant``, ``ddtrack.controllers.Controller``,
-        ``ddtrack.trajectories.Trajectory``)
-    disturbance, noise
-        the wheel-torque disturbance and the pose-measurement noise (default: none)
+    plant
+        a ``ddtrack.model.Plant``
+    controller
+        a ``ddtrack.controllers.Controller``
+    trajectory
+        a ``ddtrack.trajectories.Trajectory``
+    disturbance
+        the wheel-torque disturbance (default: none)
+    noise
+        the pose-measurement noise (default: none)
     control_period
         T_c [s]
-    divergence_error, divergence_speed
-        thresholds of the ``diverged`` status: tracking error [m], |v| [m/s] or |omega| [rad/s]
+    divergence_error
+        the tracking error [m] beyond which the run has diverged
+    divergence_speed
+        the |v| [m/s] or |omega| [rad/s] beyond which the run has diverged
     solver
         how the plant is integrated over a period (:class:`~ddtrack.integrators.Solver`; default
         ``RK4(simulation.substeps)``, 10 steps): its class and step count are part of the compiled program
