@@ -299,3 +299,27 @@ def test_runs_of_different_lengths_share_a_program_and_keep_their_own_length():
     padded = run._replace(status=np.asarray(1), failure_index=np.asarray(210))  # diverged at period 210 of 216
     assert within_run(padded, 201).status_name == "ok" and within_run(padded, 201).failure_time is None
     assert within_run(padded._replace(failure_index=np.asarray(150)), 201).status_name == "diverged"
+
+
+def test_cells_of_different_control_periods_share_a_program():
+    """The control period is a per-run number of the batch (each run's ``ClosedLoop`` carries its own): cells at
+    0.01 s and 0.0125 s over the same number of periods share one key and one batched call, and each cell's rows are
+    the bits of its own batch."""
+    import ddtrack
+    from ddtrack.runner import prepare_batch
+    from ddtrack.studies.cells import cells_rows, program_key
+
+    cells = []
+    for period, duration in ((0.01, 2.0), (0.0125, 2.5)):  # 200 periods each
+        timing = (f"simulation.control_period={period}", f"simulation.duration={duration}")
+        scenario = ddtrack.load_scenario(
+            SCENARIOS / "circle.toml", overrides=(*timing, f"simulation.metric_window=[0, {duration}]")
+        )
+        cells.append(((scenario, *prepare_batch(scenario, [0, 1])), [0, 1]))
+    assert len({program_key(*prepared) for prepared, _ in cells}) == 1
+    jax.clear_caches()
+    with counting_programs() as counts:
+        rows = cells_rows(cells, 4)
+    assert counts[SIMULATION] == 1
+    assert rows == [monte_carlo(prepared[0], [0, 1], chunk_size=2) for prepared, _ in cells]
+    assert rows[0][0]["e_tr_mean"] != rows[1][0]["e_tr_mean"]  # the period changes the run
