@@ -18,18 +18,13 @@ import textwrap
 
 import numpy as np
 import pytest
+from dds_helpers import LOOPBACK
 from rosbags.interfaces import Nodetype
 
 from ddtrack.errors import ConfigError, RunError
 from ddtrack.ros import dds, wire
 from ddtrack.ros.messages import header, message, planar_pose, stamp, typestore
 
-LOOPBACK = (
-    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
-    "<AllowMulticast>false</AllowMulticast></General>"  # lo has no multicast here: discovery goes to the peer
-    '<Discovery><Peers><Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex></Discovery>'
-    "</Domain></CycloneDDS>"
-)
 DOMAIN = os.getpid() % 200 + 20  # a pytest worker's own domain (pytest -n: one file runs in one worker)
 PROCESS_TIMEOUT = 25  # [s] a node that found no peer gives up after 15 s; this only stops a hung process
 

@@ -46,41 +46,90 @@ def odometry_covariances(
     ``gyro_noise_density`` [rad/s/sqrt(Hz)]: the turns come from a gyro of that white noise (None: the encoders').
     """
     theta, v, omega = (np.asarray(columns[f"odom_{name}"], dtype=float) for name in ("theta", "v", "omega"))
-    reading = 0.0 if encoder_counts == 0 else (2.0 * np.pi / encoder_counts) ** 2 / 12.0
-    fix = np.diag([fix_position_std**2, fix_position_std**2, fix_heading_std**2])
-    # the augmented error (pose error, last readings' errors): 3 + 2 states, readings' errors independent
-    sigma = np.zeros((5, 5))
-    sigma[3:, 3:] = reading * np.eye(2)
-    pose = np.zeros((len(theta), 3, 3))
-    wheels = np.array([[0.5, 0.5], [0.5 / half_axle, -0.5 / half_axle]]) * wheel_radius  # (dphi_R, dphi_L) -> (d, turn)
-    gyro = gyro_noise_density is not None
-    if gyro:  # the encoders give the distance only; the turn's error is the gyro's, fresh each period
-        wheels[1] = 0.0
-    density = gyro_noise_density or 0.0
-    for k in range(1, len(theta)):
-        distance, turn = v[k] * period, omega[k] * period  # the arc of period k - 1 -> k, as the estimate took it
-        middle = theta[k - 1] + turn / 2.0
-        f = np.array([[1.0, 0.0, -distance * np.sin(middle)], [0.0, 1.0, distance * np.cos(middle)], [0.0, 0.0, 1.0]])
-        arc = np.array(
-            [
-                [np.cos(middle), -distance / 2.0 * np.sin(middle)],
-                [np.sin(middle), distance / 2.0 * np.cos(middle)],
-                [0.0, 1.0],
-            ]
-        )
-        g = arc @ wheels
-        step = np.block([[f, g], [np.zeros((2, 3)), np.zeros((2, 2))]])
-        noise = np.vstack([-g, np.eye(2)])  # the new readings' errors enter the increment with a minus sign
-        sigma = step @ sigma @ step.T + reading * noise @ noise.T
-        sigma[:3, :3] += density**2 * period * np.outer(arc[:, 1], arc[:, 1])
-        if fix_periods and k % fix_periods == 0:
-            sigma[:3, :3] = (1.0 - fix_gain) ** 2 * sigma[:3, :3] + fix_gain**2 * fix
-            sigma[:3, 3:] *= 1.0 - fix_gain
-            sigma[3:, :3] *= 1.0 - fix_gain
-        pose[k] = sigma[:3, :3]
-    speed = 4.0 * reading * (wheel_radius / 2.0 / period) ** 2  # two increments, each of two readings' errors
-    twist = np.diag([speed, 0.0, density**2 / period if gyro else speed / half_axle**2])
-    return _ros_six(pose), _ros_six(np.broadcast_to(twist, pose.shape))
+    propagation = CovariancePropagation(
+        wheel_radius=wheel_radius,
+        half_axle=half_axle,
+        period=period,
+        encoder_counts=encoder_counts,
+        fix_periods=fix_periods,
+        fix_gain=fix_gain,
+        fix_position_std=fix_position_std,
+        fix_heading_std=fix_heading_std,
+        gyro_noise_density=gyro_noise_density,
+    )
+    pose = np.stack([propagation.step(*row) for row in zip(theta, v, omega, strict=True)]) if len(theta) else None
+    pose = np.zeros((0, 3, 3)) if pose is None else pose
+    return _ros_six(pose), _ros_six(np.broadcast_to(propagation.twist, pose.shape))
+
+
+class CovariancePropagation:
+    """The odometry estimate's covariance period by period (:func:`odometry_covariances`' arguments), so a live
+    robot (``ddtrack robot``) computes each period's in constant time.
+
+    Attributes
+    ----------
+    twist : ndarray
+        (3, 3) covariance of (v, 0, omega), the same every period.
+    """
+
+    def __init__(
+        self,
+        *,
+        wheel_radius: float,
+        half_axle: float,
+        period: float,
+        encoder_counts: int,
+        fix_periods: int = 0,
+        fix_gain: float = 0.0,
+        fix_position_std: float = 0.0,
+        fix_heading_std: float = 0.0,
+        gyro_noise_density: float | None = None,
+    ) -> None:
+        self.period, self.fix_periods, self.fix_gain = period, fix_periods, fix_gain
+        self.reading = 0.0 if encoder_counts == 0 else (2.0 * np.pi / encoder_counts) ** 2 / 12.0
+        self.fix = np.diag([fix_position_std**2, fix_position_std**2, fix_heading_std**2])
+        # the augmented error (pose error, last readings' errors): 3 + 2 states, readings' errors independent
+        self.sigma = np.zeros((5, 5))
+        self.sigma[3:, 3:] = self.reading * np.eye(2)
+        # (dphi_R, dphi_L) -> (d, turn)
+        self.wheels = np.array([[0.5, 0.5], [0.5 / half_axle, -0.5 / half_axle]]) * wheel_radius
+        self.gyro = gyro_noise_density is not None
+        if self.gyro:  # the encoders give the distance only; the turn's error is the gyro's, fresh each period
+            self.wheels[1] = 0.0
+        self.density = gyro_noise_density or 0.0
+        speed = 4.0 * self.reading * (wheel_radius / 2.0 / period) ** 2  # two increments, each of two readings' errors
+        self.twist = np.diag([speed, 0.0, self.density**2 / period if self.gyro else speed / half_axle**2])
+        self.k, self.theta = 0, 0.0
+
+    def step(self, theta: float, v: float, omega: float) -> np.ndarray:
+        """The (3, 3) covariance of (x, y, yaw) at the next period, whose estimate is (``theta``, ``v``, ``omega``)."""
+        k, period = self.k, self.period
+        if k > 0:
+            sigma, reading, density = self.sigma, self.reading, self.density
+            distance, turn = v * period, omega * period  # the arc of period k - 1 -> k, as the estimate took it
+            middle = self.theta + turn / 2.0
+            f = np.array(
+                [[1.0, 0.0, -distance * np.sin(middle)], [0.0, 1.0, distance * np.cos(middle)], [0.0, 0.0, 1.0]]
+            )
+            arc = np.array(
+                [
+                    [np.cos(middle), -distance / 2.0 * np.sin(middle)],
+                    [np.sin(middle), distance / 2.0 * np.cos(middle)],
+                    [0.0, 1.0],
+                ]
+            )
+            g = arc @ self.wheels
+            step = np.block([[f, g], [np.zeros((2, 3)), np.zeros((2, 2))]])
+            noise = np.vstack([-g, np.eye(2)])  # the new readings' errors enter the increment with a minus sign
+            sigma = step @ sigma @ step.T + reading * noise @ noise.T
+            sigma[:3, :3] += density**2 * period * np.outer(arc[:, 1], arc[:, 1])
+            if self.fix_periods and k % self.fix_periods == 0:
+                sigma[:3, :3] = (1.0 - self.fix_gain) ** 2 * sigma[:3, :3] + self.fix_gain**2 * self.fix
+                sigma[:3, 3:] *= 1.0 - self.fix_gain
+                sigma[3:, :3] *= 1.0 - self.fix_gain
+            self.sigma = sigma
+        self.k, self.theta = k + 1, theta
+        return self.sigma[:3, :3].copy()
 
 
 def _ros_six(planar: np.ndarray) -> np.ndarray:

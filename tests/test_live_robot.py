@@ -1,0 +1,234 @@
+"""``ddtrack robot`` (docs/ros.md): a scenario's plant as a ROS 2 robot, driven over DDS by a node that is not
+ddtrack's (plain Cyclone DDS with ROS 2's type names, standing for a user's ROS 2 node), in lockstep.
+
+Each test starts its processes on the loopback only, in a DDS domain of its own.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from dds_helpers import loopback_environment
+
+ROOT = Path(__file__).resolve().parents[1]
+FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
+SHORT = ["--set", "simulation.duration=1.5", "--set", "simulation.metric_window=[0.0,1.5]"]
+PERIOD = 0.05  # [s] the scenario's control period
+PROCESS_TIMEOUT = 120  # [s] only stops a hung process
+
+# A user's ROS 2 node as plain Cyclone DDS: ROS 2's IDL types and topic names, nothing of ddtrack. It answers each
+# /clock with one /cmd_vel (constant, or varying with the count of clocks), and prints the clocks and odometry it got.
+DRIVER = textwrap.dedent(
+    """
+    import dataclasses, json, math, os, sys, time
+    from dataclasses import dataclass
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.idl import IdlStruct
+    from cyclonedds.idl.types import array, float64, int32, uint32
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+
+    @dataclass
+    class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+        sec: int32
+        nanosec: uint32
+
+    @dataclass
+    class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+        clock: Time
+
+    @dataclass
+    class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+        stamp: Time
+        frame_id: str
+
+    @dataclass
+    class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+        x: float64
+        y: float64
+        z: float64
+
+    @dataclass
+    class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+        linear: Vector3
+        angular: Vector3
+
+    @dataclass
+    class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+        x: float64
+        y: float64
+        z: float64
+        w: float64
+
+    @dataclass
+    class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+        position: Vector3
+        orientation: Quaternion
+
+    @dataclass
+    class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+        pose: Pose
+        covariance: array[float64, 36]
+
+    @dataclass
+    class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
+        twist: Twist
+        covariance: array[float64, 36]
+
+    @dataclass
+    class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
+        header: Header
+        child_frame_id: str
+        pose: PoseWithCovariance
+        twist: TwistWithCovariance
+
+    pattern, v, omega = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+    qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
+    participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
+    clocks = DataReader(participant, Topic(participant, "rt/clock", Clock), qos=qos)
+    odometry = DataReader(participant, Topic(participant, "rt/odom", Odometry), qos=qos)
+    commands = DataWriter(participant, Topic(participant, "rt/cmd_vel", Twist), qos=qos)
+    got, odom, answered = [], [], 0
+    last = time.monotonic() + 90  # the robot starts (JAX, the plant's program) before its first clock
+    while time.monotonic() < last:
+        for sample in odometry.take(N=100):
+            if isinstance(sample, Odometry):
+                q = sample.pose.pose.orientation
+                yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+                stamp = sample.header.stamp.sec * 10**9 + sample.header.stamp.nanosec
+                odom.append([stamp, sample.pose.pose.position.x, sample.pose.pose.position.y, yaw,
+                             sample.twist.twist.linear.x, sample.twist.twist.angular.z, sample.pose.covariance[0]])
+        new = [s for s in clocks.take(N=100) if isinstance(s, Clock)]
+        if not new:
+            time.sleep(0.0005)
+            continue
+        while not commands.get_matched_subscriptions():  # the robot's subscription, before the first answer
+            time.sleep(0.005)
+        for sample in new:
+            got.append(sample.clock.sec * 10**9 + sample.clock.nanosec)
+            k = len(got) - 1
+            if pattern == "quit" and k == 10:  # a driver that stops answering
+                print(json.dumps({"clocks": got[:-1], "odom": odom, "answered": answered}))
+                sys.exit(0)
+            if pattern == "varying":
+                speed, turn = v * (1 + 0.5 * math.sin(k / 3)), omega * math.cos(k / 5)
+            else:
+                speed, turn = v, omega
+            commands.write(Twist(Vector3(speed, 0.0, 0.0), Vector3(0.0, 0.0, turn)))
+            answered += 1
+        last = time.monotonic() + 3  # the robot is done when its clock stops
+    print(json.dumps({"clocks": got, "odom": odom, "answered": answered}))
+    """
+)
+
+
+def _domain(offset: int) -> int:
+    """A DDS domain of this test's own (test processes run in parallel)."""
+    return (os.getpid() + 37 * offset) % 200 + 20
+
+
+def _drive(tmp_path: Path, name: str, offset: int, pattern: str = "constant", *options: str, code: int = 0):
+    """Run ``ddtrack robot --mode lockstep`` and the driver node; (robot's stdout, driver's output, run folder)."""
+    env = loopback_environment(_domain(offset))
+    out = tmp_path / name
+    robot_cmd = [sys.executable, "-m", "ddtrack", "robot", str(FIGURE8), "--mode", "lockstep", *SHORT, *options]
+    robot_cmd += ["--out", str(out)]
+    v, omega = 0.15, 0.4
+    started = [
+        subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for cmd in (robot_cmd, [sys.executable, "-c", DRIVER, pattern, str(v), str(omega)])
+    ]
+    try:
+        (robot_out, robot_err), (driver_out, driver_err) = (p.communicate(timeout=PROCESS_TIMEOUT) for p in started)
+    finally:
+        for process in started:
+            process.kill()
+    assert started[0].returncode == code, robot_err[-3000:]
+    assert started[1].returncode == 0, driver_err[-3000:]
+    return robot_out + robot_err, json.loads(driver_out.splitlines()[-1]), out
+
+
+def test_a_plain_ros_2_node_drives_the_robot_in_lockstep(tmp_path):
+    summary, driven, folder = _drive(tmp_path, "run", 1)
+    periods = 30  # 1.5 s at 20 Hz
+    clocks = np.array(driven["clocks"])
+    assert len(clocks) == periods and driven["answered"] == periods
+    assert np.all(np.diff(clocks) == round(PERIOD * 1e9)) and clocks[0] == 0  # sim time from 0, one period apart
+    odom = np.array(driven["odom"])
+    assert len(odom) == periods and np.array_equal(odom[:, 0], clocks)  # each period's odometry, stamped t_k
+    x, y, yaw, v, omega = odom[:, 1:6].T
+    # the Burger starts at (0, 0) heading 45 degrees: driven forward and turning left, x and y grow, yaw rises
+    assert x[-1] > 0.05 and y[-1] > 0.0 and np.all(np.diff(x[5:]) > 0)
+    assert np.all(np.diff(yaw[5:]) > 0) and yaw[-1] - yaw[0] > 0.2
+    assert 0.1 < v[-1] < 0.2 and 0.3 < omega[-1] < 0.5  # the PI wheel loop reached the command
+    assert odom[-1, 6] > 0.0  # the odometry estimate's covariance grows as it drives
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and metrics["e_tr_mean"] > 0
+    table = pq.read_table(folder / "timeseries.parquet")
+    assert table.num_rows == periods and table.column("v_cmd").to_pylist()[-1] == pytest.approx(0.15)
+    assert (folder / "ddtrack.json").is_file() and "lockstep, 30 periods" in summary
+
+
+def test_lockstep_is_deterministic(tmp_path):
+    tables = []
+    for i in range(2):
+        _, driven, folder = _drive(tmp_path, f"run{i}", 2 + i, pattern="varying")
+        assert len(driven["clocks"]) == 30
+        tables.append(pq.read_table(folder / "timeseries.parquet"))
+    first, second = tables
+    assert first.column_names == second.column_names
+    for name in first.column_names:
+        a, b = (np.asarray(t.column(name).to_numpy(zero_copy_only=False)) for t in tables)
+        assert a.tobytes() == b.tobytes(), name
+
+
+def test_a_silent_driver_ends_the_run_and_sigterm_stops_it(tmp_path):
+    said, driven, folder = _drive(tmp_path, "silent", 4, "quit", "--timeout", "1", code=1)
+    assert len(driven["clocks"]) == 10 and "the driver stopped answering" in said
+    assert pq.read_table(folder / "timeseries.parquet").num_rows == 10  # what was simulated, scored
+    assert json.loads((folder / "metrics.json").read_text())["status"] == "ok"
+    # realtime with nobody driving: zero velocity held; SIGTERM stops it, and the folder is still written
+    out = tmp_path / "stopped"
+    command = [sys.executable, "-m", "ddtrack", "robot", str(FIGURE8), "--mode", "realtime", "--out", str(out)]
+    env = loopback_environment(_domain(5))
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr is not None and "robot on DDS domain" in process.stderr.readline()
+        time.sleep(1.0)
+        process.send_signal(signal.SIGTERM)
+        said, _ = process.communicate(timeout=PROCESS_TIMEOUT)
+    finally:
+        process.kill()
+    assert process.returncode == 0 and "stopped" in said
+    rows = pq.read_table(out / "timeseries.parquet").num_rows
+    assert 10 <= rows <= 40, rows  # about 1 s at 20 Hz
+    assert np.all(pq.read_table(out / "timeseries.parquet").column("v_cmd").to_numpy() == 0.0)
+
+
+def _ddtrack(*args: str) -> subprocess.CompletedProcess:
+    env = loopback_environment(_domain(9))
+    command = [sys.executable, "-m", "ddtrack", "robot", *args]
+    return subprocess.run(command, env=env, capture_output=True, text=True, timeout=PROCESS_TIMEOUT)
+
+
+def test_a_torque_plant_and_an_unknown_mode_are_refused(tmp_path):
+    done = _ddtrack(str(ROOT / "scenarios" / "paper_line.toml"), "--mode", "fast", "--out", str(tmp_path / "r"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    line, hint = done.stderr.strip().splitlines()  # ConfigError's line and its fix
+    assert line.startswith("error: plant.model: 'dynamic' takes torque") and "velocity-input" in hint
+    done = _ddtrack(str(FIGURE8), "--mode", "warp", "--out", str(tmp_path / "r"))
+    assert done.returncode == 2 and "--mode" in done.stderr and "lockstep" in done.stderr
+    assert not (tmp_path / "r").exists()
