@@ -67,6 +67,11 @@ DRIVER = textwrap.dedent(
         angular: Vector3
 
     @dataclass
+    class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
+        header: Header
+        twist: Twist
+
+    @dataclass
     class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
         x: float64
         y: float64
@@ -100,7 +105,8 @@ DRIVER = textwrap.dedent(
     participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
     clocks = DataReader(participant, Topic(participant, "rt/clock", Clock), qos=qos)
     odometry = DataReader(participant, Topic(participant, "rt/odom", Odometry), qos=qos)
-    commands = DataWriter(participant, Topic(participant, "rt/cmd_vel", Twist), qos=qos)
+    stamped = pattern.endswith("stamped")
+    commands = DataWriter(participant, Topic(participant, "rt/cmd_vel", TwistStamped if stamped else Twist), qos=qos)
     got, odom, answered = [], [], 0
     last = time.monotonic() + 90  # the robot starts (JAX, the plant's program) before its first clock
     while time.monotonic() < last:
@@ -120,14 +126,16 @@ DRIVER = textwrap.dedent(
         for sample in new:
             got.append(sample.clock.sec * 10**9 + sample.clock.nanosec)
             k = len(got) - 1
-            if pattern == "quit" and k == 10:  # a driver that stops answering
+            if pattern.startswith("quit") and k == 10:  # a driver that stops answering
                 print(json.dumps({"clocks": got[:-1], "odom": odom, "answered": answered}))
                 sys.exit(0)
             if pattern == "varying":
                 speed, turn = v * (1 + 0.5 * math.sin(k / 3)), omega * math.cos(k / 5)
             else:
                 speed, turn = v, omega
-            commands.write(Twist(Vector3(speed, 0.0, 0.0), Vector3(0.0, 0.0, turn)))
+            twist = Twist(Vector3(speed, 0.0, 0.0), Vector3(0.0, 0.0, turn))
+            stamp = Time(got[-1] // 10**9, got[-1] % 10**9)
+            commands.write(TwistStamped(Header(stamp, "base_link"), twist) if stamped else twist)
             answered += 1
         last = time.monotonic() + 3  # the robot is done when its clock stops
     print(json.dumps({"clocks": got, "odom": odom, "answered": answered}))
@@ -196,9 +204,13 @@ def test_lockstep_is_deterministic(tmp_path):
 
 
 def test_a_silent_driver_ends_the_run_and_sigterm_stops_it(tmp_path):
-    said, driven, folder = _drive(tmp_path, "silent", 4, "quit", "--timeout", "1", code=1)
-    assert len(driven["clocks"]) == 10 and "the driver stopped answering" in said
-    assert pq.read_table(folder / "timeseries.parquet").num_rows == 10  # what was simulated, scored
+    stamped = ("--twist-stamped", "--start", "1700000000.5")  # a TwistStamped driver, stamps from a given start
+    said, driven, folder = _drive(tmp_path, "silent", 4, "quit-stamped", "--timeout", "1", *stamped, code=1)
+    clocks = np.array(driven["clocks"])
+    assert len(clocks) == 10 and "the driver stopped answering" in said
+    assert clocks[0] == 1_700_000_000_500_000_000 and np.all(np.diff(clocks) == round(PERIOD * 1e9))
+    table = pq.read_table(folder / "timeseries.parquet")
+    assert table.num_rows == 10 and table.column("v_cmd").to_pylist()[-1] == pytest.approx(0.15)  # what was driven
     assert json.loads((folder / "metrics.json").read_text())["status"] == "ok"
     # realtime with nobody driving: zero velocity held; SIGTERM stops it, and the folder is still written
     out = tmp_path / "stopped"
@@ -216,6 +228,13 @@ def test_a_silent_driver_ends_the_run_and_sigterm_stops_it(tmp_path):
     rows = pq.read_table(out / "timeseries.parquet").num_rows
     assert 10 <= rows <= 40, rows  # about 1 s at 20 Hz
     assert np.all(pq.read_table(out / "timeseries.parquet").column("v_cmd").to_numpy() == 0.0)
+
+
+def test_fast_mode_runs_the_duration_undriven(tmp_path):
+    done = _ddtrack(str(FIGURE8), "--mode", "fast", *SHORT, "--out", str(tmp_path / "fast"))
+    assert done.returncode == 0 and "fast, 30 periods (1.5 s), done" in done.stdout, done.stderr
+    table = pq.read_table(tmp_path / "fast" / "timeseries.parquet")
+    assert table.num_rows == 30 and not any(table.column("v_cmd").to_pylist())  # zero before any command
 
 
 def _ddtrack(*args: str) -> subprocess.CompletedProcess:
