@@ -69,7 +69,7 @@ import dataclasses
 import math
 from functools import partial
 from os import PathLike
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, NamedTuple
 
 import gymnasium
 import jax
@@ -78,7 +78,6 @@ import numpy as np
 from gymnasium import spaces
 from jax import Array
 
-from .._pytree import pytree_dataclass
 from ..controllers import NNAdaptiveParameters
 from ..errors import ConfigError, RunError, did_you_mean
 from ..geometry import posture_error
@@ -96,7 +95,7 @@ from ..scenario import (
     load_scenario,
 )
 from ..shipped import scenario_path
-from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws, measured
+from ..sim import DIVERGENCE_SPEED, STATUS_NAMES, ClosedLoop, Draws, HeldInput, measured
 
 ACTION_MODES = ("torque", "gains")
 DEFAULT_SCENARIO = "training"  #: scenarios/training.toml: plant, disturbance and noise drawn per seed
@@ -121,20 +120,6 @@ class _Episode(NamedTuple):
     gain_log_down: Array  #: (3,) log(K0 / gain_min)
     obs_low: Array  #: (n_obs,) bounds of the observation, float64 copies of the float32 ones
     obs_high: Array
-
-
-@pytree_dataclass
-class HeldTorques:
-    """Torque mode's controller: the action, scaled, as the wheel torques of the period."""
-
-    torques: Array  #: (2,) [N m]
-    output_kind: ClassVar[str] = "torque"
-
-    def init(self, x0: Array, ref0: Any, key: Array) -> tuple[()]:
-        return ()
-
-    def step(self, t: Array, y: Array, ref: Any, memory: tuple[()]) -> tuple[Array, tuple[()], dict]:
-        return self.torques, memory, {}
 
 
 def _gains(episode: _Episode, action: Array) -> Array:
@@ -193,7 +178,7 @@ def _step(
             controller = dataclasses.replace(controller, outer=outer)
     else:
         gains = None
-        controller = HeldTorques(action * episode.torque_scale)
+        controller = HeldInput(action * episode.torque_scale, output_kind="torque")  # torque mode: the action
     loop = dataclasses.replace(episode.loop, controller=controller)
     x_next, next_memory, status, (_, _, _, u, _) = loop.period(
         x, memory, jnp.asarray(0), k, episode.xi_disturbance[k], episode.xi_noise[k]

@@ -12,6 +12,7 @@ scenario's reference against the true pose, into a run folder.
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import time
 from collections.abc import Callable, Iterator
@@ -25,12 +26,9 @@ import numpy as np
 from jax import Array
 
 from ..errors import ConfigError, RunError
-from ..geometry import posture_error
-from ..layout import BODY, pose
 from ..runner import closed_loop, prepare, run_record
 from ..scenario import Scenario
-from ..sim import ClosedLoop, SimResult, measured, period_status, plant_period, recorded
-from ..sim.simulate import commanded
+from ..sim import ClosedLoop, HeldInput, SimResult, measured, period_record
 from .covariance import CovariancePropagation, _ros_six
 from .dds import DEFAULT_QOS, TF_STATIC_QOS, Participant, Subscriber
 from .export import CLOCK, ODOMETRY, TF, Frames, _odometry, _transform, viewer_of, wheel_signals
@@ -105,30 +103,11 @@ def require_velocity_plant(scenario: Scenario, plant: Any) -> None:
 
 
 def _period(loop: ClosedLoop, x: Any, u: Any, k: Any, xi_disturbance: Any, xi_noise: Any) -> tuple[Any, ...]:
-    """One period of ``loop`` holding ``u``: :meth:`ClosedLoop.period` with ``u`` in place of the controller's."""
-    plant = loop.plant
-    t = k * loop.control_period
-    ref = loop.trajectory(t)
-    body = plant.observe(x)
-    y = loop.noise.measure(measured(plant, x), xi_noise)  # what the scenario's controller would see: the odometry
-    u, x_next = plant_period(
-        plant,
-        x,
-        u,
-        t,
-        xi_disturbance,
-        disturbance=loop.disturbance,
-        control_period=loop.control_period,
-        solver=loop.solver,
-    )
-    error = posture_error(*pose(body), ref.x, ref.y, ref.theta)
-    status = period_status(
-        body, x_next, u, error, divergence_error=loop.divergence_error, divergence_speed=loop.divergence_speed
-    )
-    channels = commanded(plant, u) | plant.logged(x, u)
-    extra = {name: x[plant.state_layout.index(name)] for name in recorded(plant).names if name not in BODY.names}
-    logs = {name: jnp.asarray(value, float) for name, value in channels.items()}
-    return x_next, status, y, (body, ref, error, u, logs, extra)
+    """One period of ``loop`` holding ``u``: :meth:`ClosedLoop.period` with ``u`` in place of the controller's, and
+    what :func:`ddtrack.sim.simulate` records of it."""
+    held = dataclasses.replace(loop, controller=HeldInput(u))
+    x_next, _, status, (body, ref, error, u, logs) = held.period(x, (), jnp.asarray(0), k, xi_disturbance, xi_noise)
+    return x_next, status, (body, ref, error, u, *period_record(loop.plant, x, u, logs))
 
 
 class Robot:
@@ -214,7 +193,7 @@ class Robot:
 
     def advance(self, v: float, omega: float) -> bool:
         """Hold (v [m/s], omega [rad/s]) over period k and advance the plant; whether the run goes on."""
-        x_next, status, _, row = self._step(self.loop, self.x, jnp.array([v, omega]), self.k, *self._draw(self.k))
+        x_next, status, row = self._step(self.loop, self.x, jnp.array([v, omega]), self.k, *self._draw(self.k))
         self.record.rows.append(row)
         if int(status) != 0:
             self.record.status, self.record.failure_index = int(status), self.k

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from .._pytree import pytree_dataclass
+from .._pytree import pytree_dataclass, static_field
 from ..geometry import posture_error
 from ..integrators import RK4, Solver
 from ..layout import BODY, POSTURE_ERROR, VELOCITY_COMMAND, WHEEL_TORQUES, Layout, pose, velocity
@@ -199,6 +199,31 @@ class ClosedLoop:
         return x_next, next_memory, new_status, (body, ref, error, u, logs)
 
 
+@pytree_dataclass
+class HeldInput:
+    """A controller that holds a given plant input over the period: the environment's action, a live robot's
+    ``/cmd_vel``; so that stepping them is :meth:`ClosedLoop.period` too. ``output_kind`` (None: unchecked) is what
+    :func:`require_matching_input` compares with the plant's input."""
+
+    u: Array  #: (2,) wheel torques [N m] or (v [m/s], omega [rad/s])
+    output_kind: str | None = static_field(default=None, why="the plant input it is checked against")
+
+    def init(self, x0: Array, ref0: Any, key: Array) -> tuple[()]:
+        return ()
+
+    def step(self, t: Array, y: Array, ref: Any, memory: tuple[()]) -> tuple[Array, tuple[()], dict]:
+        return self.u, memory, {}
+
+
+def period_record(plant: Plant, x: Array, u: Array, logs: dict) -> tuple[dict[str, Array], dict[str, Array]]:
+    """What a period records beside BODY, the reference, the error and the input (:func:`simulate`'s scan, a live
+    robot's periods): the logged channels (the held velocity command, the controller's ``logs``, the plant's own,
+    e.g. the torques a torque-driven plant applied) and the plant's recorded states beyond BODY, by name."""
+    channels = commanded(plant, u) | logs | plant.logged(x, u)
+    extra = {name: x[plant.state_layout.index(name)] for name in recorded(plant).names if name not in BODY.names}
+    return {name: jnp.asarray(value, float) for name, value in channels.items()}, extra
+
+
 @partial(jax.jit, static_argnames=("n_steps",))
 def simulate(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimResult:
     """Simulate ``n_steps`` control periods of ``loop``: its controller on its plant tracking its trajectory.
@@ -254,9 +279,7 @@ def simulate(loop: ClosedLoop, x0: Array, draws: Draws, *, n_steps: int) -> SimR
             x, memory, status, k, xi_disturbance, xi_noise
         )
         failure_index = jnp.where((status == 0) & (new_status != 0), k, failure_index)
-        channels = commanded(plant, u) | logs | plant.logged(x, u)  # e.g. the torques a torque-driven plant applied
-        extra = {name: x[plant.state_layout.index(name)] for name in recorded(plant).names if name not in BODY.names}
-        record = (body, ref, error, u, {name: jnp.asarray(value, float) for name, value in channels.items()}, extra)
+        record = (body, ref, error, u, *period_record(plant, x, u, logs))
         return (x_next, next_memory, new_status, failure_index), record
 
     steps = jnp.arange(n_steps)
