@@ -33,12 +33,19 @@ _TYPES = PLAIN_NODE.split("TYPES = {")[0]
 FAKE_ROBOT = _TYPES + textwrap.dedent(
     """
     import math
+
+    @dataclass
+    class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
+        header: Header
+        twist: Twist
+
     config = json.loads(sys.argv[1])
+    COMMAND = TwistStamped if config.get("stamped") else Twist
     period, (x, y, theta) = config["period"], config["pose"]
     QOS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
     participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
     odom = DataWriter(participant, Topic(participant, "rt/odom", Odometry), qos=QOS)
-    commands = DataReader(participant, Topic(participant, "rt/cmd_vel", Twist), qos=QOS)
+    commands = DataReader(participant, Topic(participant, "rt/cmd_vel", COMMAND), qos=QOS)
     deadline = time.monotonic() + 20
     while not (odom.get_matched_subscriptions() and commands.get_matched_publications()):
         if time.monotonic() > deadline:
@@ -66,7 +73,8 @@ FAKE_ROBOT = _TYPES + textwrap.dedent(
 
     def take():
         global v, omega
-        got = [s for s in commands.take(N=100) if isinstance(s, Twist)]
+        got = [s for s in commands.take(N=100) if isinstance(s, COMMAND)]
+        got = [s.twist if config.get("stamped") else s for s in got]
         for s in got:
             received.append([time.monotonic(), s.linear.x, s.angular.z])
         if got:
@@ -199,6 +207,36 @@ def test_drive_in_lockstep_tracks_the_figure_eight(tmp_path):
     assert len(topics["/cmd_vel"]) == 801 and len(topics["/odom"]) == steps and len(topics["/reference"]) == 800
 
 
+def test_a_path_received_on_path_topic_is_followed(tmp_path, monkeypatch):
+    """A planner's Path (5 poses over 4 s, stamped) replaces the figure eight; the robot ends at its last pose."""
+    from ddtrack.ros import dds
+    from ddtrack.ros.messages import header, message, planar_pose
+
+    domain, heading = _domain(5), math.atan2(0.05, 0.1)
+    poses = [
+        message(
+            "geometry_msgs/msg/PoseStamped",
+            header=header(n * 10**9, "map"),
+            pose=planar_pose(0.1 * n, 0.05 * n, heading),
+        )
+        for n in range(5)
+    ]
+    robot = _robot({"mode": "lockstep", "period": 0.05, "steps": 81, "pose": [0.0, 0.0, heading]}, domain)
+    drive = _drive(
+        [str(FIGURE8), "--clock", "odom", "--path-topic", "/plan", "--bag", str(tmp_path / "p.mcap")], domain
+    )
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    with dds.Participant(domain=domain) as node:
+        plans = node.publisher("/plan", "nav_msgs/msg/Path")
+        assert plans.wait_for_subscriptions(timeout=20)
+        plans.publish(message("nav_msgs/msg/Path", header=header(0, "map"), poses=poses))
+        (code, _, err), (robot_code, out, robot_err) = _finish(drive, robot)
+    assert code == 0 and robot_code == 0, (err + robot_err)[-3000:]
+    assert "stopped at the reference's end: 80 commands" in err
+    x, y, _ = json.loads(out)["pose"]
+    assert math.hypot(x - 0.4, y - 0.2) < 0.005  # a straight segment at constant speed: tracked exactly
+
+
 def test_stale_odometry_stops_the_robot_within_the_timeout(tmp_path):
     domain, timeout = _domain(2), 0.3
     robot = _robot(
@@ -233,6 +271,7 @@ def test_stale_odometry_stops_the_robot_within_the_timeout(tmp_path):
 
 
 def test_sigint_sends_a_zero_twist_and_leaves_a_readable_bag(tmp_path):
+    """With --twist-stamped, as Jazzy's diff_drive_controller takes commands."""
     domain, marker, bag = _domain(3), tmp_path / "ten_commands", tmp_path / "interrupted.mcap"
     robot = _robot(
         {
@@ -243,10 +282,11 @@ def test_sigint_sends_a_zero_twist_and_leaves_a_readable_bag(tmp_path):
             "listen_for": 25.0,
             "marker": str(marker),
             "until_quiet": True,
+            "stamped": True,
         },
         domain,
     )
-    drive = _drive([str(FIGURE8), "--bag", str(bag)], domain)
+    drive = _drive([str(FIGURE8), "--twist-stamped", "--bag", str(bag)], domain)
     deadline = time.monotonic() + 20
     while not marker.exists() and time.monotonic() < deadline and drive.poll() is None:
         time.sleep(0.05)
@@ -259,7 +299,7 @@ def test_sigint_sends_a_zero_twist_and_leaves_a_readable_bag(tmp_path):
     received = json.loads(out)["received"]
     assert received[-1][1:] == [0.0, 0.0] and any(r[1] for r in received)
     topics = _bag_topics(bag)
-    assert topics["/cmd_vel"][-1].linear.x == 0.0 and len(topics["/cmd_vel"]) >= 10 and len(topics["/odom"]) >= 5
+    assert topics["/cmd_vel"][-1].twist.linear.x == 0.0 and len(topics["/cmd_vel"]) >= 10 and len(topics["/odom"]) >= 5
     assert f"wrote {bag}" in stdout
 
 

@@ -24,15 +24,7 @@ import numpy as np
 from ..errors import ConfigError
 from .dds import DEFAULT_QOS, SENSOR_DATA_QOS, Participant
 from .export import write_bag
-from .messages import (
-    NANOSECONDS,
-    header,
-    message,
-    planar_pose,
-    quaternion_yaw,
-    stamp_nanoseconds,
-    twist,
-)
+from .messages import NANOSECONDS, header, message, planar_pose, quaternion_yaw, stamp_nanoseconds, twist
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 PATH_TYPE = "nav_msgs/msg/Path"
@@ -204,8 +196,9 @@ class Driver:
         self.duration = float(scenario.simulation.duration)
         self.limits = speed_limits(scenario)
         self._controller, self._key = loop.controller, draws.controller_key
-        self._step = jax.jit(loop.controller.step)
-        self._reference = jax.jit(loop.trajectory)
+        # closures, not the objects: jit hashes its function, and a trajectory or controller holding arrays has no hash
+        self._step = jax.jit(lambda t, y, ref, memory: loop.controller.step(t, y, ref, memory))
+        self._reference = jax.jit(lambda t: loop.trajectory(t))
         self.memory: Any = None
         self.summary = DriveSummary()
         self.recorded: list[tuple[str, str, int, Any]] = []
