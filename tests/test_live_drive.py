@@ -25,6 +25,7 @@ FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
 TIMEOUT = 30  # [s] a hung process is killed; each test takes well under this
 
 pytest.importorskip("cyclonedds")
+pytestmark = pytest.mark.slow  # each test starts ddtrack (JAX, a compiled controller): 7 to 15 s
 
 # The ROS 2 types of test_dds's plain node (Time ... Odometry), then a unicycle that integrates the last twist it
 # received. lockstep: publish /odom stamped t_k, wait for the next /cmd_vel, advance one period; periodic: publish
@@ -265,8 +266,9 @@ def test_stale_odometry_stops_the_robot_within_the_timeout(tmp_path):
     moving = [r for r in seen["received"] if r[0] < last_odom and (r[1] or r[2])]
     assert moving, "drive never commanded the robot while odometry came"
     zeros = [r[0] for r in seen["received"] if r[0] > last_odom and r[1:] == [0.0, 0.0]]
-    # the first period after the odometry aged past the timeout: timeout + one period, and scheduling slack
-    assert zeros and zeros[0] - last_odom < timeout + 0.05 + 0.15, zeros[:3]
+    # the first period after the odometry aged past the timeout: timeout + one period, and slack for a loaded
+    # machine (pytest -n auto); 0.38 s measured on an idle one
+    assert zeros and zeros[0] - last_odom < timeout + 0.05 + 0.25, zeros[:3]
     assert all(r[1:] == [0.0, 0.0] for r in seen["received"] if r[0] > zeros[0])  # and it stays stopped
 
 
