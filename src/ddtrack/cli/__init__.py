@@ -398,6 +398,7 @@ def exit_now(code: int) -> None:
 
 
 from . import bench as _bench  # noqa: E402, F401  (registers bench)
+from . import drive as _drive  # noqa: E402, F401  (registers drive)
 from . import identify as _identify  # noqa: E402, F401  (registers excite and identify)
 from . import live as _live  # noqa: E402, F401  (registers robot)
 from . import ros as _ros  # noqa: E402, F401  (registers export and import)

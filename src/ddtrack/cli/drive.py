@@ -1,0 +1,122 @@
+"""``ddtrack drive``: the scenario's controller on a ROS 2 robot, live over DDS (docs/ros.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..errors import ConfigError
+from . import cli, folder_name, overwrite_option
+
+
+@cli.command(short_help="Drive a ROS 2 robot live with SCENARIO's controller (/odom in, /cmd_vel out).")
+@click.argument("scenario", type=click.Path(path_type=Path))
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="SECTION.KEY=VALUE",
+    help="Override a scenario value, e.g. --set simulation.duration=20 (repeatable).",
+)
+@click.option("--odom-topic", default="/odom", show_default=True, metavar="TOPIC", help="nav_msgs/Odometry in.")
+@click.option("--cmd-vel-topic", default="/cmd_vel", show_default=True, metavar="TOPIC", help="Commands out.")
+@click.option(
+    "--path-topic",
+    metavar="TOPIC",
+    help="Follow the first nav_msgs/Path received here (e.g. /plan), timed by its stamps as `import` does, "
+    "instead of the scenario's reference.",
+)
+@click.option("--twist-stamped", is_flag=True, help="Publish geometry_msgs/TwistStamped instead of Twist.")
+@click.option(
+    "--odom-timeout",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=0.5,
+    show_default=True,
+    metavar="SECONDS",
+    help="Send a zero twist while the latest odometry is older than this.",
+)
+@click.option(
+    "--clock",
+    type=click.Choice(["wall", "odom"]),
+    default="wall",
+    show_default=True,
+    help="wall: a period timer using the latest odometry; odom: one command per new odometry stamp (lockstep "
+    "with a simulated robot), t = stamp - first stamp.",
+)
+@click.option("--dry-run", is_flag=True, help="Compute and record the commands without publishing them.")
+@click.option(
+    "--wait",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=30.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="How long to wait for the first odometry (and path).",
+)
+@click.option("--domain", type=click.IntRange(min=0), help="DDS domain [default: ROS_DOMAIN_ID, else 0].")
+@click.option("--bag", type=click.Path(path_type=Path), metavar="FILE.mcap", help="[default: OUT/drive.mcap].")
+@click.option("--out", type=click.Path(path_type=Path), help="Folder of the bag [default: runs/NAME_drive].")
+@overwrite_option
+def drive(
+    scenario: Path,
+    overrides: tuple[str, ...],
+    odom_topic: str,
+    cmd_vel_topic: str,
+    path_topic: str | None,
+    twist_stamped: bool,
+    odom_timeout: float,
+    clock: str,
+    dry_run: bool,
+    wait: float,
+    domain: int | None,
+    bag: Path | None,
+    out: Path | None,
+    overwrite: bool,
+) -> int:
+    """Drive a ROS 2 robot live with SCENARIO's velocity-output controller: odometry in, /cmd_vel out at the
+    control period, clamped to the scenario's limits; a zero twist on stale odometry, at the reference's end and
+    on Ctrl-C or SIGTERM. What it saw and sent is recorded as an MCAP bag."""
+    from ..ros.dds import dds_topic_name
+    from ..ros.drive import DriveOptions, refuse_torque_law
+    from ..ros.drive import drive as drive_robot
+    from ..scenario import load_scenario
+
+    spec = load_scenario(scenario, overrides=overrides)
+    refuse_torque_law(spec)
+    for option, topic in (
+        ("--odom-topic", odom_topic),
+        ("--cmd-vel-topic", cmd_vel_topic),
+        ("--path-topic", path_topic),
+    ):
+        if topic is not None:
+            try:
+                dds_topic_name(topic)
+            except ConfigError as exc:
+                raise ConfigError(option, f"{exc.message} (give a name like /odom)") from None
+    target = (
+        bag
+        if bag is not None
+        else (out if out is not None else Path("runs") / folder_name(f"{spec.name}_drive")) / "drive.mcap"
+    )
+    if target.suffix.lower() != ".mcap":
+        raise ConfigError("--bag", f"'{target}' is not an .mcap file", "give FILE.mcap")
+    if target.exists() and not overwrite:
+        raise ConfigError("--bag", f"'{target}' exists", "give a new file, or add --overwrite to replace it")
+    options = DriveOptions(
+        odom_topic=odom_topic,
+        cmd_vel_topic=cmd_vel_topic,
+        path_topic=path_topic,
+        twist_stamped=twist_stamped,
+        odom_timeout=odom_timeout,
+        clock="odom" if clock == "odom" else "wall",
+        dry_run=dry_run,
+        wait=wait,
+        domain=domain,
+    )
+    summary = drive_robot(spec, options, target)
+    for line in summary.lines():
+        click.echo(line, err=True)
+    if summary.counts:
+        topics = ", ".join(f"{topic} {count}" for topic, count in summary.counts.items())
+        click.echo(f"wrote {target}: {topics}")
+    return {"SIGINT": 130, "SIGTERM": 143}.get(summary.ended, 0)

@@ -1,0 +1,396 @@
+"""``ddtrack drive``: a scenario's velocity-output controller driving a ROS 2 robot live (docs/ros.md).
+
+It reads odometry (``nav_msgs/msg/Odometry``), follows the scenario's reference or a planner's path, and publishes
+``/cmd_vel`` once per control period, on the wall clock (a period timer using the latest odometry) or in lockstep
+with a simulated robot (one command per new odometry stamp). Safety first: a zero twist when the odometry is stale,
+at the reference's end, on SIGINT and on SIGTERM; every command clamped to the scenario's limits. What it saw and
+sent is written as an MCAP bag when it stops, however it stops.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ..errors import ConfigError
+from .dds import DEFAULT_QOS, SENSOR_DATA_QOS, Participant
+from .export import write_bag
+from .messages import NANOSECONDS, header, message, planar_pose, quaternion_yaw, stamp_nanoseconds, twist
+
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+PATH_TYPE = "nav_msgs/msg/Path"
+TWIST_TYPE = "geometry_msgs/msg/Twist"
+TWIST_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
+POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
+#: [s] of the reference between two lines of the live tracking error on stderr
+REPORT_EVERY = 2.0
+
+
+@dataclass(frozen=True)
+class DriveOptions:
+    """How ``ddtrack drive`` talks to the robot; the CLI's options, one field each (docs/ros.md).
+
+    Attributes
+    ----------
+    odom_topic, cmd_vel_topic : str
+        The odometry in and the commands out.
+    path_topic : str or None
+        A ``nav_msgs/msg/Path`` topic whose first message replaces the scenario's reference (re-timed as
+        ``ddtrack import`` does).
+    twist_stamped : bool
+        Publish ``geometry_msgs/msg/TwistStamped`` instead of ``Twist``.
+    odom_timeout : float
+        [s] odometry older than this stops the robot (a zero twist each period).
+    clock : {"wall", "odom"}
+        A period timer on the wall clock, or one command per new odometry stamp (lockstep).
+    dry_run : bool
+        Compute and record the commands without publishing them.
+    wait : float
+        [s] to wait for the first odometry (and path) before giving up.
+    domain : int or None
+        The DDS domain (``ROS_DOMAIN_ID`` when None).
+    """
+
+    odom_topic: str = "/odom"
+    cmd_vel_topic: str = "/cmd_vel"
+    path_topic: str | None = None
+    twist_stamped: bool = False
+    odom_timeout: float = 0.5
+    clock: Literal["wall", "odom"] = "wall"
+    dry_run: bool = False
+    wait: float = 30.0
+    domain: int | None = None
+
+
+@dataclass
+class DriveSummary:
+    """What a drive did: commands sent, tracking error, timing, and how it ended (for the summary line)."""
+
+    commands: int = 0
+    stale: int = 0  #: periods that sent a zero twist for stale odometry
+    missed: int = 0  #: wall clock: periods skipped because the loop woke a period or more late
+    errors: list[float] = field(default_factory=list)  #: e_tr [m] of each computed command
+    jitter: list[float] = field(default_factory=list)  #: wall clock: |actual - nominal| period [s]
+    ended: str = "the reference's end"
+    counts: dict[str, int] = field(default_factory=dict)  #: messages in the bag, by topic
+
+    def lines(self) -> list[str]:
+        """The end-of-drive summary, in plain lines."""
+        mean = f"{np.mean(self.errors):.4g} m" if self.errors else "none"
+        lines = [f"stopped at {self.ended}: {self.commands} commands, mean e_tr {mean}, {self.stale} stale periods"]
+        if self.jitter:
+            ms = 1e3 * np.asarray(self.jitter)
+            median, p99 = np.percentile(ms, 50), np.percentile(ms, 99)
+            lines.append(f"  missed periods {self.missed}; jitter median {median:.3f} ms, 99th percentile {p99:.3f} ms")
+        return lines
+
+
+def speed_limits(scenario: Any) -> tuple[float | None, float | None]:
+    """The clamp of the commands, (|v| [m/s], |omega| [rad/s]) or None where nothing bounds one.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario driven.
+
+    Returns
+    -------
+    tuple of (float or None, float or None)
+        The controller's ``max_velocity`` and ``max_yaw_rate`` where its config has them, else the robot's top
+        speeds (its preset's rated limits, ``robot.top_speed``, its motors').
+    """
+    config = scenario.controller
+    top_v, top_w, _ = scenario.top_speeds()
+    v = getattr(config, "max_velocity", None)
+    w = getattr(config, "max_yaw_rate", None)
+    return (top_v if v is None else float(v)), (top_w if w is None else float(w))
+
+
+def refuse_torque_law(scenario: Any) -> None:
+    """Refuse a law whose output is wheel torques: no standard ROS 2 topic carries them to a robot's base."""
+    from ..scenario import controller_output
+
+    if controller_output(scenario.controller) == "torque":
+        inner = getattr(scenario.controller, "inner", None)
+        how = f" (inner = '{inner}')" if inner else ""
+        raise ConfigError(
+            "controller",
+            f"'{scenario.controller.kind}'{how} outputs wheel torques, and no standard ROS 2 topic carries wheel "
+            "torques to a robot: drive needs a velocity-output law (inner = 'none', or a cmd_vel controller)",
+        )
+
+
+def path_scenario(data: dict[str, Any], path_message: Any, topic: str, base_dir: Path) -> Any:
+    """The scenario with its trajectory replaced by a received Path, re-timed exactly as ``ddtrack import`` does
+    (the Path goes through a bag and :func:`~ddtrack.ros.references.reference_from_path`)."""
+    from ..scenario.files import validate_scenario
+    from .references import reference_from_path
+
+    poses = list(path_message.poses)
+    finite = all(math.isfinite(p.pose.position.x) and math.isfinite(p.pose.position.y) for p in poses)
+    if not finite:
+        raise ConfigError("--path-topic", f"the path on '{topic}' has a NaN or infinite position", "")
+    if len(poses) < 2:
+        raise ConfigError("--path-topic", f"the path on '{topic}' has {len(poses)} poses", "a path needs two")
+    with tempfile.TemporaryDirectory(prefix="ddtrack-drive-") as scratch:
+        bag = Path(scratch) / "path.mcap"
+        write_bag(bag, [(topic, PATH_TYPE, 1, path_message)])
+        reference = reference_from_path(bag, topic)
+    columns = reference.columns
+    duration = float(columns["t"][-1])
+    data = dict(data)
+    data["trajectory"] = {
+        "kind": "waypoints",
+        "points": [[float(x), float(y)] for x, y in zip(columns["x"], columns["y"], strict=True)],
+        "times": [float(t) for t in columns["t"]],
+        "yaws": [float(yaw) for yaw in columns["yaw"]],
+    }
+    simulation = dict(data.get("simulation", {}))
+    simulation.update(duration=duration, metric_window=[0.0, duration])
+    data["simulation"] = simulation
+    data.pop("initial", None)  # the robot starts where it is
+    return validate_scenario(data, base_dir=base_dir)
+
+
+class Stop:
+    """SIGINT and SIGTERM set a flag, read once per period, instead of raising inside DDS or the bag writer."""
+
+    def __init__(self) -> None:
+        self.signal: str | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> Stop:
+        for number in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._previous[number] = signal.signal(number, self._handle)
+            except ValueError:  # not the main thread: the caller's own handling applies
+                break
+        return self
+
+    def _handle(self, number: int, frame: Any) -> None:
+        self.signal = signal.Signals(number).name
+
+    def __exit__(self, *exc: object) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+class Driver:
+    """One live drive: the jitted controller, the topics, the recording; :func:`drive` runs it."""
+
+    def __init__(self, scenario: Any, options: DriveOptions, node: Participant, log: Callable[[str], None]) -> None:
+        import jax
+
+        from ..runner import closed_loop, prepare
+
+        setup, draws = prepare(scenario)
+        loop = closed_loop(scenario, setup)
+        self.scenario, self.options, self.log = scenario, options, log
+        self.period = float(loop.control_period)
+        self.duration = float(scenario.simulation.duration)
+        self.limits = speed_limits(scenario)
+        self._controller, self._key = loop.controller, draws.controller_key
+        # closures, not the objects: jit hashes its function, and a trajectory or controller holding arrays has no hash
+        self._step = jax.jit(lambda t, y, ref, memory: loop.controller.step(t, y, ref, memory))
+        self._reference = jax.jit(lambda t: loop.trajectory(t))
+        self.memory: Any = None
+        self.summary = DriveSummary()
+        self.recorded: list[tuple[str, str, int, Any]] = []
+        self.frames = ("odom", "base_footprint")
+        ref = self._reference(0.0)
+        y = np.array([float(ref.x), float(ref.y), float(ref.theta), 0.0, 0.0])
+        self._step(0.0, y, ref, self._controller.init(y, ref, self._key))  # compiled now, not in the first period
+        self.odometry = node.subscriber(options.odom_topic, ODOMETRY_TYPE, qos=SENSOR_DATA_QOS)
+        msgtype = TWIST_STAMPED_TYPE if options.twist_stamped else TWIST_TYPE
+        self.commands = None if options.dry_run else node.publisher(options.cmd_vel_topic, msgtype, qos=DEFAULT_QOS)
+        self._next_report = 0.0
+
+    def body(self, odom: Any) -> np.ndarray:
+        """The BODY vector [x, y, theta, v, omega] of an odometry message (its twist is in the body frame)."""
+        pose, velocity = odom.pose.pose, odom.twist.twist
+        self.frames = (odom.header.frame_id or "odom", odom.child_frame_id or "base_footprint")
+        return np.array(
+            [pose.position.x, pose.position.y, quaternion_yaw(pose.orientation), velocity.linear.x, velocity.angular.z]
+        )
+
+    def command(self, t: float, y: np.ndarray, nanoseconds: int) -> tuple[float, float]:
+        """The clamped command at reference time ``t`` for the measured ``y``; records the reference and e_tr."""
+        ref = self._reference(t)
+        if self.memory is None:
+            self.memory = self._controller.init(y, ref, self._key)
+        u, self.memory, _ = self._step(t, y, ref, self.memory)
+        v, omega = (float(value) for value in np.asarray(u)[:2])
+        if not (math.isfinite(v) and math.isfinite(omega)):
+            v, omega = 0.0, 0.0
+        v_max, w_max = self.limits
+        v = v if v_max is None else min(max(v, -v_max), v_max)
+        omega = omega if w_max is None else min(max(omega, -w_max), w_max)
+        x_ref, y_ref, theta_ref = float(ref.x), float(ref.y), float(ref.theta)
+        error = math.hypot(y[0] - x_ref, y[1] - y_ref)
+        self.summary.errors.append(error)
+        pose = message(
+            POSE_STAMPED_TYPE, header=header(nanoseconds, self.frames[0]), pose=planar_pose(x_ref, y_ref, theta_ref)
+        )
+        self.recorded.append(("/reference", POSE_STAMPED_TYPE, time.time_ns(), pose))
+        if t >= self._next_report:
+            self.log(f"t = {t:6.2f} s  e_tr = {error:.4f} m  v = {v:+.3f} m/s  omega = {omega:+.3f} rad/s")
+            self._next_report = t + REPORT_EVERY
+        return v, omega
+
+    def send(self, v: float, omega: float, nanoseconds: int, *, final: bool = False) -> None:
+        """Publish (unless a dry run) and record one command (the final zero twist is not counted)."""
+        body = twist(v, omega)
+        if self.options.twist_stamped:
+            outgoing = message(TWIST_STAMPED_TYPE, header=header(nanoseconds, self.frames[1]), twist=body)
+        else:
+            outgoing = body
+        if self.commands is not None:
+            self.commands.publish(outgoing)
+        self.recorded.append((self.options.cmd_vel_topic, outgoing.__msgtype__, time.time_ns(), outgoing))
+        self.summary.commands += not final
+
+    def halt(self) -> None:
+        """The last word to the robot: a zero twist, acknowledged where the subscription is reliable."""
+        try:
+            self.send(0.0, 0.0, time.time_ns(), final=True)
+            if self.commands is not None:
+                self.commands.flush(timeout=1.0)
+        except Exception as exc:  # the bag must still be written
+            self.log(f"warning: the final zero twist failed ({exc})")
+
+    def receive(self, messages: list[Any]) -> list[Any]:
+        """Record received odometry (at its receive time) and hand it on."""
+        now = time.time_ns()
+        self.recorded += [(self.options.odom_topic, ODOMETRY_TYPE, now, m) for m in messages]
+        return messages
+
+    def first_odometry(self, stop: Stop) -> Any:
+        """Wait for the first odometry message, up to ``options.wait`` seconds (a stop signal ends the wait)."""
+        deadline = time.monotonic() + self.options.wait
+        while stop.signal is None and time.monotonic() < deadline:
+            if received := self.receive(self.odometry.wait(timeout=0.1)):
+                return received[-1]
+        self.summary.ended = stop.signal or ""
+        if stop.signal is None:
+            raise ConfigError(
+                "--odom-topic",
+                f"no {ODOMETRY_TYPE} on '{self.options.odom_topic}' within {self.options.wait:g} s",
+                "check the topic, ROS_DOMAIN_ID and the network (docs/ros.md)",
+            )
+        return None
+
+    def run_wall(self, stop: Stop) -> None:
+        """A period timer on the wall clock: each tick commands from the latest odometry, or stops the robot."""
+        latest = self.first_odometry(stop)
+        if latest is None:
+            return
+        start = time.monotonic()
+        wall0 = time.time_ns()
+        received_at, k, woke = start, 0, start
+        while stop.signal is None:
+            t = k * self.period
+            if t >= self.duration - 1e-9:
+                return
+            if fresh := self.receive(self.odometry.take()):
+                latest, received_at = fresh[-1], time.monotonic()
+            nanoseconds = wall0 + round(t * NANOSECONDS)
+            if time.monotonic() - received_at > self.options.odom_timeout:
+                self.summary.stale += 1
+                self.send(0.0, 0.0, nanoseconds)
+            else:
+                self.send(*self.command(t, self.body(latest), nanoseconds), nanoseconds)
+            k += 1
+            late = time.monotonic() - (start + k * self.period)
+            if late >= self.period:  # woke a whole period late or more: those ticks are skipped, not bunched
+                skipped = int(late // self.period)
+                self.summary.missed += skipped
+                k += skipped
+            pause = start + k * self.period - time.monotonic()
+            if pause > 0:
+                time.sleep(pause)
+            now = time.monotonic()
+            self.summary.jitter.append(abs((now - woke) - self.period))
+            woke = now
+        self.summary.ended = stop.signal
+
+    def run_odom(self, stop: Stop) -> None:
+        """Lockstep: one command per odometry message stamped later than the last, at t = stamp - first stamp."""
+        first = self.first_odometry(stop)
+        if first is None:
+            return
+        origin = stamp_nanoseconds(first.header)
+        last, pending, received_at = origin - 1, [first], time.monotonic()
+        while stop.signal is None:
+            for odom in pending:
+                nanoseconds = stamp_nanoseconds(odom.header)
+                if nanoseconds <= last:
+                    continue
+                last = nanoseconds
+                t = (nanoseconds - origin) / NANOSECONDS
+                if t >= self.duration - 1e-9:
+                    return
+                self.send(*self.command(t, self.body(odom), nanoseconds), nanoseconds)
+            if pending := self.receive(self.odometry.wait(timeout=min(self.period, self.options.odom_timeout))):
+                received_at = time.monotonic()
+            elif time.monotonic() - received_at > self.options.odom_timeout:
+                self.summary.stale += 1
+                self.send(0.0, 0.0, time.time_ns())
+        self.summary.ended = stop.signal
+
+
+def drive(scenario: Any, options: DriveOptions, bag: Path, *, log: Callable[[str], None] | None = None) -> DriveSummary:
+    """Drive a robot live with the scenario's controller until the reference ends or a signal stops it.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario: its velocity-output controller, reference, control period and limits.
+    options : DriveOptions
+        Topics, clock, timeouts (the CLI's options).
+    bag : Path
+        The MCAP file written at the end with /odom in, /cmd_vel out and /reference, whatever ended the drive.
+    log : callable, optional
+        Where the live tracking error goes (a line at a time); stderr by default.
+
+    Returns
+    -------
+    DriveSummary
+        Commands sent, tracking errors, missed periods, jitter and how it ended.
+    """
+    say = log if log is not None else (lambda line: print(line, file=sys.stderr, flush=True))
+    refuse_torque_law(scenario)
+    with Stop() as stop, Participant(options.domain) as node:
+        if options.path_topic is not None:
+            scenario = _await_path(scenario, options, node, stop)
+        if stop.signal is not None:
+            return DriveSummary(ended=stop.signal)
+        driver = Driver(scenario, options, node, say)
+        try:
+            say(f"waiting for {ODOMETRY_TYPE} on {options.odom_topic} (domain {node.domain})")
+            (driver.run_odom if options.clock == "odom" else driver.run_wall)(stop)
+        finally:
+            driver.halt()
+            driver.summary.counts = write_bag(bag, driver.recorded) if driver.recorded else {}
+    return driver.summary
+
+
+def _await_path(scenario: Any, options: DriveOptions, node: Participant, stop: Stop) -> Any:
+    """The scenario with the reference of the first Path received on ``options.path_topic``."""
+    assert options.path_topic is not None, "called with a path topic"
+    paths = node.subscriber(options.path_topic, PATH_TYPE, qos=DEFAULT_QOS)
+    deadline = time.monotonic() + options.wait
+    while stop.signal is None and time.monotonic() < deadline:
+        if received := paths.wait(timeout=0.1):
+            return path_scenario(scenario.model_dump(mode="json"), received[-1], options.path_topic, Path("."))
+    if stop.signal is not None:
+        return scenario
+    raise ConfigError("--path-topic", f"no {PATH_TYPE} on '{options.path_topic}' within {options.wait:g} s", "")
