@@ -173,10 +173,11 @@ def test_a_plain_ros_2_node_drives_the_robot_in_lockstep(tmp_path):
     summary, driven, folder = _drive(tmp_path, "run", 1)
     periods = 30  # 1.5 s at 20 Hz
     clocks = np.array(driven["clocks"])
-    assert len(clocks) == periods and driven["answered"] == periods
+    # one /clock per period and the end's, t_N (which the robot publishes and no longer waits on)
+    assert len(clocks) == periods + 1 and driven["answered"] == periods + 1
     assert np.all(np.diff(clocks) == round(PERIOD * 1e9)) and clocks[0] == 0  # sim time from 0, one period apart
     odom = np.array(driven["odom"])
-    assert len(odom) == periods and np.array_equal(odom[:, 0], clocks)  # each period's odometry, stamped t_k
+    assert len(odom) == periods + 1 and np.array_equal(odom[:, 0], clocks)  # x_0 .. x_N's odometry, stamped t_k
     x, y, yaw, v, omega = odom[:, 1:6].T
     # the Burger starts at (0, 0) heading 45 degrees: driven forward and turning left, x and y grow, yaw rises
     assert x[-1] > 0.05 and y[-1] > 0.0 and np.all(np.diff(x[5:]) > 0)
@@ -194,7 +195,7 @@ def test_lockstep_is_deterministic(tmp_path):
     tables = []
     for i in range(2):
         _, driven, folder = _drive(tmp_path, f"run{i}", 2 + i, pattern="varying")
-        assert len(driven["clocks"]) == 30
+        assert len(driven["clocks"]) == 31  # t_0 .. t_30
         tables.append(pq.read_table(folder / "timeseries.parquet"))
     first, second = tables
     assert first.column_names == second.column_names

@@ -6,7 +6,8 @@ estimate where the scenario has ``[sensing] odometry`` (with its covariances, as
 else the true pose. Then it holds a velocity command over the period and advances the plant one period, as
 ``ddtrack run``'s simulator does (:func:`ddtrack.sim.plant_period`): motors, grip, latency and encoders included.
 Which command it holds is the mode's (docs/ros.md): the latest received (``realtime``, ``fast``) or the first
-received after the publication (``lockstep``, deterministic). The run is scored like ``ddtrack run``'s: the
+received after the publication (``lockstep``, deterministic). After the last period it publishes the final state
+x_N too (a driver then sees the reference's end). The run is scored like ``ddtrack run``'s: the
 scenario's reference against the true pose, into a run folder.
 """
 
@@ -169,7 +170,8 @@ class Robot:
 
     def sensed(self) -> np.ndarray:
         """x_k's BODY vector as the odometry reports it (the true one without ``[sensing] odometry``)."""
-        return np.asarray(self._odometry(self.loop, self.x, self.draws.noise[self.k]))
+        k = min(self.k, self.n_steps - 1)  # the final state x_N is read with the last period's draw
+        return np.asarray(self._odometry(self.loop, self.x, self.draws.noise[k]))
 
     def wheels(self) -> dict[str, float]:
         """x_k's wheel angles [rad] and speeds [rad/s] (:func:`ddtrack.ros.export.wheel_signals`, period by period)."""
@@ -198,7 +200,12 @@ class Robot:
         if int(status) != 0:
             self.record.status, self.record.failure_index = int(status), self.k
         self.x, self.k = x_next, self.k + 1
-        return self.record.status == 0 and self.k < self.n_steps
+        return not self.finished
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run is over: the scenario's duration simulated, or a failed period (the state then frozen)."""
+        return self.record.status != 0 or self.k >= self.n_steps
 
     def result(self) -> tuple[dict, dict]:
         """(columns, metrics) of the periods simulated, as :func:`ddtrack.runner.run_record` makes them."""
@@ -356,6 +363,8 @@ def _loop(robot: Robot, options: Options, origin: int, stop: list[bool], *topics
                 effort=np.zeros(0),
             )
         )
+        if robot.finished:  # x_N published too, so a driver sees the reference's end
+            return "done", late
         if mode == "lockstep":
             command = _first_command(commands, options.timeout, stop)
             if command is None:
@@ -363,8 +372,7 @@ def _loop(robot: Robot, options: Options, origin: int, stop: list[bool], *topics
             v, omega = _velocity(command, stamped)
         elif received := commands.take():
             v, omega = _velocity(received[-1], stamped)
-        if not robot.advance(v, omega):
-            return "done", late
+        robot.advance(v, omega)
         if mode == "realtime":
             wall += robot.period
             left = wall - time.monotonic()
