@@ -1,5 +1,6 @@
 """``ddtrack drive`` against ``ddtrack robot`` (docs/ros.md): a ddtrack controller drives a ddtrack plant over DDS,
-each in its own process, on the loopback only, in lockstep; the run scores as the same scenario run offline."""
+each in its own process, on the loopback only, in lockstep; the run scores as the same scenario run offline, drive's
+bag is a log ``identify`` fits, and the robot's run folder one ``export`` reads."""
 
 from __future__ import annotations
 
@@ -55,3 +56,15 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
     assert measured["live"]["status"] == measured["offline"]["status"] == "ok"
     live_error, offline_error = measured["live"]["e_tr_mean"], measured["offline"]["e_tr_mean"]
     assert abs(live_error - offline_error) <= 1e-6 * offline_error, (live_error, offline_error)
+
+    # what drive recorded is a log identify fits (commands and odometry on one clock), and the robot's run folder
+    # is a run as the other commands read it
+    def ddtrack(*args: str) -> str:
+        done = subprocess.run([sys.executable, "-m", "ddtrack", *args], capture_output=True, text=True, timeout=TIMEOUT)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return done.stdout + done.stderr
+
+    fitted = ddtrack("identify", str(tmp_path / "drive.mcap"))
+    assert 'model = "lag"' in fitted and "fit on the held-out last quarter" in fitted
+    assert "wrote" in ddtrack("export", str(live), "--to", str(tmp_path / "live.mcap"))
+    assert (tmp_path / "live.mcap").stat().st_size > 0

@@ -205,6 +205,7 @@ class Driver:
         self.memory: Any = None
         self.summary = DriveSummary()
         self.recorded: list[tuple[str, str, int, Any]] = []
+        self.latest_stamp = 0  #: the newest odometry stamp [ns]: the bag's clock in lockstep
         self.frames = ("odom", "base_footprint")
         ref = self._reference(0.0)
         y = np.array([float(ref.x), float(ref.y), float(ref.theta), 0.0, 0.0])
@@ -240,7 +241,7 @@ class Driver:
         pose = message(
             POSE_STAMPED_TYPE, header=header(nanoseconds, self.frames[0]), pose=planar_pose(x_ref, y_ref, theta_ref)
         )
-        self.recorded.append(("/reference", POSE_STAMPED_TYPE, time.time_ns(), pose))
+        self.recorded.append(("/reference", POSE_STAMPED_TYPE, nanoseconds, pose))
         if t >= self._next_report:
             self.log(f"t = {t:6.2f} s  e_tr = {error:.4f} m  v = {v:+.3f} m/s  omega = {omega:+.3f} rad/s")
             self._next_report = t + REPORT_EVERY
@@ -255,22 +256,28 @@ class Driver:
             outgoing = body
         if self.commands is not None:
             self.commands.publish(outgoing)
-        self.recorded.append((self.options.cmd_vel_topic, outgoing.__msgtype__, time.time_ns(), outgoing))
+        self.recorded.append((self.options.cmd_vel_topic, outgoing.__msgtype__, nanoseconds, outgoing))
         self.summary.commands += not final
 
     def halt(self) -> None:
         """The last word to the robot: a zero twist, acknowledged where the subscription is reliable."""
         try:
-            self.send(0.0, 0.0, time.time_ns(), final=True)
+            self.send(0.0, 0.0, self.now(), final=True)
             if self.commands is not None:
                 self.commands.flush(timeout=1.0)
         except Exception as exc:  # the bag must still be written
             self.log(f"warning: the final zero twist failed ({exc})")
 
+    def now(self) -> int:
+        """The bag's clock [ns]: the odometry's stamps in lockstep (simulated time), else the wall clock; so that a
+        log's commands and measurements share one time line (``ddtrack identify`` reads it)."""
+        return self.latest_stamp if self.options.clock == "odom" else time.time_ns()
+
     def receive(self, messages: list[Any]) -> list[Any]:
-        """Record received odometry (at its receive time) and hand it on."""
-        now = time.time_ns()
-        self.recorded += [(self.options.odom_topic, ODOMETRY_TYPE, now, m) for m in messages]
+        """Record received odometry (at its stamp in lockstep, else at its receive time) and hand it on."""
+        for odom in messages:
+            self.latest_stamp = max(self.latest_stamp, stamp_nanoseconds(odom.header))
+            self.recorded.append((self.options.odom_topic, ODOMETRY_TYPE, self.now(), odom))
         return messages
 
     def first_odometry(self, stop: Stop) -> Any:
@@ -343,7 +350,7 @@ class Driver:
                 received_at = time.monotonic()
             elif time.monotonic() - received_at > self.options.odom_timeout:
                 self.summary.stale += 1
-                self.send(0.0, 0.0, time.time_ns())
+                self.send(0.0, 0.0, self.now())
         self.summary.ended = stop.signal
 
 
