@@ -1,8 +1,8 @@
 """``ddtrack drive`` live (docs/ros.md): the scenario's controller against a fake robot over DDS, on the loopback.
 
 Each end runs in its own process: ``ddtrack drive`` and ``FAKE_ROBOT``, a unicycle written with plain Cyclone DDS
-(its own types, named as ROS 2's middlewares name them, on ``rt/odom`` and ``rt/cmd_vel``; nothing of ddtrack).
-Every participant talks on the loopback only (``test_dds.LOOPBACK``) and in a domain of its test's own.
+(its own types, named as ROS 2's middlewares name them, on ``rt/odom`` or ``rt/tf``, and ``rt/cmd_vel``; nothing
+of ddtrack). Every participant talks on the loopback only (``test_dds.LOOPBACK``) and in a domain of its test's own.
 """
 
 from __future__ import annotations
@@ -34,6 +34,22 @@ _TYPES = PLAIN_NODE.split("TYPES = {")[0]
 FAKE_ROBOT = _TYPES + textwrap.dedent(
     """
     import math
+    from cyclonedds.idl.types import sequence
+
+    @dataclass
+    class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+        translation: Vector3
+        rotation: Quaternion
+
+    @dataclass
+    class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+        header: Header
+        child_frame_id: str
+        transform: Transform
+
+    @dataclass
+    class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+        transforms: sequence[TransformStamped]
 
     @dataclass
     class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
@@ -45,7 +61,8 @@ FAKE_ROBOT = _TYPES + textwrap.dedent(
     period, (x, y, theta) = config["period"], config["pose"]
     QOS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
     participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
-    odom = DataWriter(participant, Topic(participant, "rt/odom", Odometry), qos=QOS)
+    POSES = ("rt/tf", TFMessage) if config.get("tf") else ("rt/odom", Odometry)  # the pose as a transform, or odometry
+    odom = DataWriter(participant, Topic(participant, *POSES), qos=QOS)
     commands = DataReader(participant, Topic(participant, "rt/cmd_vel", COMMAND), qos=QOS)
     deadline = time.monotonic() + 20
     while not (odom.get_matched_subscriptions() and commands.get_matched_publications()):
@@ -61,6 +78,13 @@ FAKE_ROBOT = _TYPES + textwrap.dedent(
         sec = 1_700_000_000 + int(t)
         stamp = Time(sec, round((t - int(t)) * 1e9))
         body = Twist(Vector3(v, 0.0, 0.0), Vector3(0.0, 0.0, omega))
+        if config.get("tf"):  # odom -> base_footprint, and a fixed joint drive must skip
+            lidar = Transform(Vector3(-0.032, 0.0, 0.172), Quaternion(0.0, 0.0, 0.0, 1.0))
+            odom.write(TFMessage([TransformStamped(Header(stamp, "odom"), "base_footprint",
+                                                   Transform(Vector3(x, y, 0.0), q)),
+                                  TransformStamped(Header(stamp, "base_footprint"), "base_scan", lidar)]))
+            published.append(time.monotonic())
+            return
         odom.write(Odometry(Header(stamp, "odom"), "base_footprint",
                             PoseWithCovariance(Pose(Point(x, y, 0.0), q), [0.0] * 36),
                             TwistWithCovariance(body, [0.0] * 36)))
@@ -166,16 +190,20 @@ def _bag_topics(bag: Path) -> dict[str, list]:
     return by_topic
 
 
-def test_drive_in_lockstep_tracks_the_figure_eight(tmp_path):
-    """One lap of the figure eight (40 s at 20 Hz, 800 periods) in lockstep with an ideal unicycle."""
+@pytest.mark.parametrize("pose_from", ["odom", "tf"])
+def test_drive_in_lockstep_tracks_the_figure_eight(tmp_path, pose_from):
+    """One lap of the figure eight (40 s at 20 Hz, 800 periods) in lockstep with an ideal unicycle; its pose read
+    from /odom, or from the transform odom -> base_footprint on /tf (its twist then differenced by drive)."""
     from ddtrack.scenario import load_scenario
 
-    duration, period, domain = 40.0, 0.05, _domain(1)
+    duration, period, domain = 40.0, 0.05, _domain(1 if pose_from == "odom" else 6)
     reference = load_scenario(FIGURE8).trajectory.build()
     start = reference(0.0)
     steps = round(duration / period) + 1  # odometry at t_0 .. t_N: N commands, and the zero twist at the end
     robot = _robot(
-        {"mode": "lockstep", "period": period, "steps": steps, "pose": [0.0, 0.0, float(start.theta)]}, domain
+        {"mode": "lockstep", "period": period, "steps": steps, "pose": [0.0, 0.0, float(start.theta)]}
+        | {"tf": pose_from == "tf"},
+        domain,
     )
     bag = tmp_path / "figure8.mcap"
     began = time.monotonic()
@@ -184,6 +212,8 @@ def test_drive_in_lockstep_tracks_the_figure_eight(tmp_path):
             str(FIGURE8),
             "--clock",
             "odom",
+            "--pose-from",
+            pose_from,
             "--set",
             f"simulation.duration={duration}",
             "--set",
@@ -205,7 +235,9 @@ def test_drive_in_lockstep_tracks_the_figure_eight(tmp_path):
     x, y, _ = seen["pose"]
     assert math.hypot(x - float(end.x), y - float(end.y)) < 0.005
     topics = _bag_topics(bag)
-    assert len(topics["/cmd_vel"]) == 801 and len(topics["/odom"]) == steps and len(topics["/reference"]) == 800
+    poses = "/odom" if pose_from == "odom" else "/tf"  # drive records what it received
+    assert sorted(topics) == sorted(["/cmd_vel", "/reference", poses])
+    assert len(topics["/cmd_vel"]) == 801 and len(topics[poses]) == steps and len(topics["/reference"]) == 800
 
 
 def test_a_path_received_on_path_topic_is_followed(tmp_path, monkeypatch):
@@ -333,6 +365,9 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, monkeypatch):
     assert err.startswith("error: --odom-topic:")
     ((code, _, err),) = _finish(_drive([str(FIGURE8), "--clock", "sim"], domain))
     assert code == 2 and "Error: Invalid value for '--clock'" in err and "Traceback" not in err  # click's usage
+    for wrong, what in (("geometry_msgs/msg/Twst", "not a ROS 2 message type"), ("std_msgs/msg/String", "not a twist")):
+        err = _one_line_error([str(FIGURE8), "--cmd-vel-type", wrong, "--bag", str(tmp_path / "x.mcap")], domain)
+        assert err.startswith(f"error: --cmd-vel-type: '{wrong}' is {what}") and "geometry_msgs/msg/TwistStamped" in err
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     poses = [
         message("geometry_msgs/msg/PoseStamped", header=header(n * 10**9, "map"), pose=planar_pose(x, 0.0, 0.0))

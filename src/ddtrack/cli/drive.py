@@ -9,6 +9,26 @@ import click
 from ..errors import ConfigError
 from . import cli, folder_name, overwrite_option
 
+#: what --cmd-vel-type accepts: the two messages a ROS 2 base takes its velocity commands in
+CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
+
+
+def command_type(given: str | None, twist_stamped: bool) -> str:
+    """The commands' message type from --cmd-vel-type and its shorthand --twist-stamped; anything but a twist is
+    refused here, in one line naming the option, before DDS or JAX start (a typo would otherwise surface as a
+    type-store error about ``msgtype``, or as a topic no robot subscribes to)."""
+    from ..ros.messages import typestore
+
+    if given is None:
+        return CMD_VEL_TYPES[1] if twist_stamped else CMD_VEL_TYPES[0]
+    accepted = " or ".join(CMD_VEL_TYPES)
+    if given not in CMD_VEL_TYPES:
+        what = "not a twist" if given in typestore().types else "not a ROS 2 message type"
+        raise ConfigError("--cmd-vel-type", f"'{given}' is {what}: give {accepted}")
+    if twist_stamped and given != CMD_VEL_TYPES[1]:
+        raise ConfigError("--cmd-vel-type", f"'{given}' contradicts --twist-stamped: give one of them")
+    return given
+
 
 @cli.command(short_help="Drive a ROS 2 robot live with SCENARIO's controller (/odom in, /cmd_vel out).")
 @click.argument("scenario", type=click.Path(path_type=Path))
@@ -27,7 +47,24 @@ from . import cli, folder_name, overwrite_option
     help="Follow the first nav_msgs/Path received here (e.g. /plan), timed by its stamps as `import` does, "
     "instead of the scenario's reference.",
 )
-@click.option("--twist-stamped", is_flag=True, help="Publish geometry_msgs/TwistStamped instead of Twist.")
+@click.option(
+    "--pose-from",
+    type=click.Choice(["odom", "tf"]),
+    default="odom",
+    show_default=True,
+    help="odom: the pose and twist of --odom-topic; tf: the pose of the transform --odom-frame -> --base-frame on "
+    "/tf (a direct one: no chained lookup), its twist differenced from consecutive stamps.",
+)
+@click.option("--odom-frame", default="odom", show_default=True, metavar="FRAME", help="Parent frame (--pose-from tf).")
+@click.option(
+    "--base-frame", default="base_footprint", show_default=True, metavar="FRAME", help="Child frame (--pose-from tf)."
+)
+@click.option(
+    "--cmd-vel-type",
+    metavar="TYPE",
+    help=f"The commands' message type: {' or '.join(CMD_VEL_TYPES)} [default: {CMD_VEL_TYPES[0]}].",
+)
+@click.option("--twist-stamped", is_flag=True, help=f"Shorthand for --cmd-vel-type {CMD_VEL_TYPES[1]}.")
 @click.option(
     "--odom-timeout",
     type=click.FloatRange(min=0.0, min_open=True),
@@ -63,6 +100,10 @@ def drive(
     odom_topic: str,
     cmd_vel_topic: str,
     path_topic: str | None,
+    pose_from: str,
+    odom_frame: str,
+    base_frame: str,
+    cmd_vel_type: str | None,
     twist_stamped: bool,
     odom_timeout: float,
     clock: str,
@@ -81,6 +122,10 @@ def drive(
     from ..ros.drive import drive as drive_robot
     from ..scenario import load_scenario
 
+    msgtype = command_type(cmd_vel_type, twist_stamped)
+    for option, frame in (("--odom-frame", odom_frame), ("--base-frame", base_frame)):
+        if not frame.strip("/") or any(c.isspace() for c in frame):
+            raise ConfigError(option, f"'{frame}' is not a frame id (give a name like odom or base_footprint)")
     spec = load_scenario(scenario, overrides=overrides)
     refuse_torque_law(spec)
     for option, topic in (
@@ -106,7 +151,10 @@ def drive(
         odom_topic=odom_topic,
         cmd_vel_topic=cmd_vel_topic,
         path_topic=path_topic,
-        twist_stamped=twist_stamped,
+        twist_stamped=msgtype == CMD_VEL_TYPES[1],
+        pose_from="tf" if pose_from == "tf" else "odom",
+        odom_frame=odom_frame,
+        base_frame=base_frame,
         odom_timeout=odom_timeout,
         clock="odom" if clock == "odom" else "wall",
         dry_run=dry_run,

@@ -1,10 +1,11 @@
 """``ddtrack drive``: a scenario's velocity-output controller driving a ROS 2 robot live (docs/ros.md).
 
-It reads odometry (``nav_msgs/msg/Odometry``), follows the scenario's reference or a planner's path, and publishes
-``/cmd_vel`` once per control period, on the wall clock (a period timer using the latest odometry) or in lockstep
-with a simulated robot (one command per new odometry stamp). Safety first: a zero twist when the odometry is stale,
-at the reference's end, on SIGINT and on SIGTERM; every command clamped to the scenario's limits. What it saw and
-sent is written as an MCAP bag when it stops, however it stops.
+It reads odometry (``nav_msgs/msg/Odometry``, or the pose of one ``/tf`` transform: ``ddtrack.ros.poses``), follows
+the scenario's reference or a planner's path, and publishes ``/cmd_vel`` once per control period, on the wall clock
+(a period timer using the latest odometry) or in lockstep with a simulated robot (one command per new odometry
+stamp). Safety first: a zero twist when the odometry is stale, at the reference's end, on SIGINT and on SIGTERM;
+every command clamped to the scenario's limits. What it saw and sent is written as an MCAP bag when it stops,
+however it stops.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from ..errors import ConfigError
 from .dds import DEFAULT_QOS, SENSOR_DATA_QOS, Participant
 from .export import write_bag
 from .messages import NANOSECONDS, header, message, planar_pose, quaternion_yaw, stamp_nanoseconds, twist
+from .poses import TF_QOS, TF_TOPIC, TF_TYPE, TfOdometry
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 PATH_TYPE = "nav_msgs/msg/Path"
@@ -48,6 +50,11 @@ class DriveOptions:
         ``ddtrack import`` does).
     twist_stamped : bool
         Publish ``geometry_msgs/msg/TwistStamped`` instead of ``Twist``.
+    pose_from : {"odom", "tf"}
+        Read the pose from the odometry topic, or from the transform ``odom_frame`` -> ``base_frame`` on ``/tf``
+        (for a robot that broadcasts no odometry; the twist is then differenced from consecutive poses).
+    odom_frame, base_frame : str
+        The parent and child frames of that transform (``pose_from="tf"`` only).
     odom_timeout : float
         [s] odometry older than this stops the robot (a zero twist each period).
     clock : {"wall", "odom"}
@@ -64,6 +71,9 @@ class DriveOptions:
     cmd_vel_topic: str = "/cmd_vel"
     path_topic: str | None = None
     twist_stamped: bool = False
+    pose_from: Literal["odom", "tf"] = "odom"
+    odom_frame: str = "odom"
+    base_frame: str = "base_footprint"
     odom_timeout: float = 0.5
     clock: Literal["wall", "odom"] = "wall"
     dry_run: bool = False
@@ -210,7 +220,12 @@ class Driver:
         ref = self._reference(0.0)
         y = np.array([float(ref.x), float(ref.y), float(ref.theta), 0.0, 0.0])
         self._step(0.0, y, ref, self._controller.init(y, ref, self._key))  # compiled now, not in the first period
-        self.odometry = node.subscriber(options.odom_topic, ODOMETRY_TYPE, qos=SENSOR_DATA_QOS)
+        if options.pose_from == "tf":
+            self.poses: TfOdometry | None = TfOdometry(options.odom_frame, options.base_frame)
+            self.odometry = node.subscriber(TF_TOPIC, TF_TYPE, qos=TF_QOS)
+        else:
+            self.poses = None
+            self.odometry = node.subscriber(options.odom_topic, ODOMETRY_TYPE, qos=SENSOR_DATA_QOS)
         msgtype = TWIST_STAMPED_TYPE if options.twist_stamped else TWIST_TYPE
         self.commands = None if options.dry_run else node.publisher(options.cmd_vel_topic, msgtype, qos=DEFAULT_QOS)
         self._next_report = 0.0
@@ -274,11 +289,26 @@ class Driver:
         return self.latest_stamp if self.options.clock == "odom" else time.time_ns()
 
     def receive(self, messages: list[Any]) -> list[Any]:
-        """Record received odometry (at its stamp in lockstep, else at its receive time) and hand it on."""
+        """Record received odometry (at its stamp in lockstep, else at its receive time) and hand it on; from /tf,
+        the messages carrying the transform are recorded as received and their odometry handed on."""
+        if self.poses is not None:
+            odometry = []
+            for tf_message in messages:
+                if found := self.poses.odometry(tf_message):
+                    self.latest_stamp = max(self.latest_stamp, *(stamp_nanoseconds(odom.header) for odom in found))
+                    self.recorded.append((TF_TOPIC, TF_TYPE, self.now(), tf_message))
+                    odometry += found
+            return odometry
         for odom in messages:
             self.latest_stamp = max(self.latest_stamp, stamp_nanoseconds(odom.header))
             self.recorded.append((self.options.odom_topic, ODOMETRY_TYPE, self.now(), odom))
         return messages
+
+    def source(self) -> str:
+        """What the pose is read from, for the waiting line and the error when none comes."""
+        if self.poses is not None:
+            return f"the transform {self.poses.parent} -> {self.poses.child} on {TF_TOPIC}"
+        return f"{ODOMETRY_TYPE} on {self.options.odom_topic}"
 
     def first_odometry(self, stop: Stop) -> Any:
         """Wait for the first odometry message, up to ``options.wait`` seconds (a stop signal ends the wait)."""
@@ -289,9 +319,9 @@ class Driver:
         self.summary.ended = stop.signal or ""
         if stop.signal is None:
             raise ConfigError(
-                "--odom-topic",
-                f"no {ODOMETRY_TYPE} on '{self.options.odom_topic}' within {self.options.wait:g} s",
-                "check the topic, ROS_DOMAIN_ID and the network (docs/ros.md)",
+                "--pose-from" if self.poses is not None else "--odom-topic",
+                f"no {self.source()} within {self.options.wait:g} s",
+                "check the topic, frames, ROS_DOMAIN_ID and the network (docs/ros.md)",
             )
         return None
 
@@ -382,7 +412,7 @@ def drive(scenario: Any, options: DriveOptions, bag: Path, *, log: Callable[[str
             return DriveSummary(ended=stop.signal)
         driver = Driver(scenario, options, node, say)
         try:
-            say(f"waiting for {ODOMETRY_TYPE} on {options.odom_topic} (domain {node.domain})")
+            say(f"waiting for {driver.source()} (domain {node.domain})")
             (driver.run_odom if options.clock == "odom" else driver.run_wall)(stop)
         finally:
             driver.halt()
