@@ -25,16 +25,20 @@ FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
 SHORT = ["--set", "simulation.duration=1.5", "--set", "simulation.metric_window=[0.0,1.5]"]
 PERIOD = 0.05  # [s] the scenario's control period
 PROCESS_TIMEOUT = 120  # [s] only stops a hung process
+# a planner's path (t [s], x, y [m], yaw [rad]): a straight line away from the figure eight's start at (0, 0)
+PATH = [(0.1 * k, 0.2 + 0.01 * k, 0.1 + 0.005 * k, float(np.arctan2(0.005, 0.01))) for k in range(16)]
 
 # A user's ROS 2 node as plain Cyclone DDS: ROS 2's IDL types and topic names, nothing of ddtrack. It answers each
 # /clock with one /cmd_vel (constant, or varying with the count of clocks), and prints the clocks and odometry it got.
+# Patterns "path" and "nanpath" first publish a nav_msgs/Path on /plan, latched (reliable, transient local), as a
+# planner does: PATH's poses, or the same with a NaN; "nanpath" then waits for the robot to refuse it and leave.
 DRIVER = textwrap.dedent(
     """
     import dataclasses, json, math, os, sys, time
     from dataclasses import dataclass
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.idl import IdlStruct
-    from cyclonedds.idl.types import array, float64, int32, uint32
+    from cyclonedds.idl.types import array, float64, int32, sequence, uint32
     from cyclonedds.pub import DataWriter
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.sub import DataReader
@@ -79,9 +83,25 @@ DRIVER = textwrap.dedent(
         w: float64
 
     @dataclass
+    class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+        x: float64
+        y: float64
+        z: float64
+
+    @dataclass
     class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-        position: Vector3
+        position: Point
         orientation: Quaternion
+
+    @dataclass
+    class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
+        header: Header
+        pose: Pose
+
+    @dataclass
+    class Path(IdlStruct, typename="nav_msgs::msg::dds_::Path_"):
+        header: Header
+        poses: sequence[PoseStamped]
 
     @dataclass
     class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
@@ -103,6 +123,25 @@ DRIVER = textwrap.dedent(
     pattern, v, omega = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
     participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
+    if pattern.endswith("path"):
+        latched = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.TransientLocal,
+                      Policy.History.KeepLast(1))
+        plan = DataWriter(participant, Topic(participant, "rt/plan", Path), qos=latched)
+        poses = []
+        for t, x, y, yaw in json.loads(os.environ["DDTRACK_TEST_PATH"]):
+            if pattern == "nanpath" and len(poses) == 3:
+                x = float("nan")
+            at = Time(int(t), round((t % 1) * 1e9))
+            q = Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+            poses.append(PoseStamped(Header(at, "odom"), Pose(Point(x, y, 0.0), q)))
+        plan.write(Path(Header(Time(0, 0), "odom"), poses))
+        if pattern == "nanpath":  # the robot matches, takes the path, refuses it and leaves
+            deadline, seen = time.monotonic() + 90, False
+            while time.monotonic() < deadline and not (seen and not plan.get_matched_subscriptions()):
+                seen = seen or bool(plan.get_matched_subscriptions())
+                time.sleep(0.01)
+            print(json.dumps({"clocks": [], "odom": [], "answered": 0}))
+            sys.exit(0)
     clocks = DataReader(participant, Topic(participant, "rt/clock", Clock), qos=qos)
     odometry = DataReader(participant, Topic(participant, "rt/odom", Odometry), qos=qos)
     stamped = pattern.endswith("stamped")
@@ -150,7 +189,7 @@ def _domain(offset: int) -> int:
 
 def _drive(tmp_path: Path, name: str, offset: int, pattern: str = "constant", *options: str, code: int = 0):
     """Run ``ddtrack robot --mode lockstep`` and the driver node; (robot's stdout, driver's output, run folder)."""
-    env = loopback_environment(_domain(offset))
+    env = loopback_environment(_domain(offset)) | {"DDTRACK_TEST_PATH": json.dumps(PATH)}
     out = tmp_path / name
     robot_cmd = [sys.executable, "-m", "ddtrack", "robot", str(FIGURE8), "--mode", "lockstep", *SHORT, *options]
     robot_cmd += ["--out", str(out)]
@@ -189,6 +228,30 @@ def test_a_plain_ros_2_node_drives_the_robot_in_lockstep(tmp_path):
     table = pq.read_table(folder / "timeseries.parquet")
     assert table.num_rows == periods and table.column("v_cmd").to_pylist()[-1] == pytest.approx(0.15)
     assert (folder / "ddtrack.json").is_file() and "lockstep, 30 periods" in summary
+
+
+def test_a_path_on_a_topic_is_the_reference(tmp_path):
+    _, driven, folder = _drive(tmp_path, "path", 6, "path", "--path-topic", "/plan")
+    periods = 30  # the path's 1.5 s at 20 Hz
+    assert len(driven["clocks"]) == periods + 1
+    odom = np.array(driven["odom"])
+    assert abs(odom[0, 1]) < 1e-9 and abs(odom[0, 2]) < 1e-9  # the start pose stays the scenario's (0, 0)
+    table = pq.read_table(folder / "timeseries.parquet")
+    t, x_ref, y_ref = (table.column(name).to_numpy() for name in ("t", "x_ref", "y_ref"))
+    assert table.num_rows == periods and x_ref[0] == pytest.approx(0.2) and y_ref[0] == pytest.approx(0.1)
+    knots = np.array([pose[:3] for pose in PATH[:15]])  # every other period is one of the path's poses
+    assert np.allclose(np.column_stack([t, x_ref, y_ref])[::2], knots, rtol=0, atol=1e-9)
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and metrics["e_tr_mean"] > 0.15  # scored against the path, 0.22 m away at t=0
+
+
+def test_a_nan_path_and_no_path_are_refused(tmp_path):
+    said, _, folder = _drive(tmp_path, "nan", 7, "nanpath", "--path-topic", "/plan", code=2)
+    assert "Traceback" not in said and not folder.exists()
+    assert said.strip().splitlines()[-1].startswith("error: --path-topic: the path on '/plan' has a NaN")
+    done = _ddtrack(str(FIGURE8), "--mode", "fast", "--path-topic", "/none", "--timeout", "1", "--out", str(folder))
+    assert done.returncode == 2 and "Traceback" not in done.stderr and not folder.exists()
+    assert done.stderr.strip().splitlines()[-1] == "error: --path-topic: no nav_msgs/msg/Path on '/none' within 1 s"
 
 
 def test_lockstep_is_deterministic(tmp_path):

@@ -41,7 +41,13 @@ def _start_nanoseconds(text: str | None) -> int | None:
     default=5.0,
     show_default=True,
     metavar="SECONDS",
-    help="lockstep: how long to wait for a /cmd_vel before ending the run.",
+    help="lockstep: how long to wait for a /cmd_vel before ending the run; with --path-topic, for the path too.",
+)
+@click.option(
+    "--path-topic",
+    metavar="TOPIC",
+    help="Score against the first nav_msgs/msg/Path on TOPIC (awaited before the first period, re-timed as "
+    "`ddtrack import` does) instead of the scenario's reference; the start pose stays the scenario's.",
 )
 @click.option(
     "--start", metavar="SECONDS", help="Stamp of t = 0 [s since the epoch; default: 0, realtime the wall clock]."
@@ -56,6 +62,7 @@ def robot(
     scenario: Path,
     mode: str,
     timeout: float,
+    path_topic: str | None,
     start: str | None,
     twist_stamped: bool,
     domain: int | None,
@@ -66,8 +73,8 @@ def robot(
 ) -> int:
     """Run SCENARIO's plant (a velocity-input one: its motors, grip, latency and encoders) as a ROS 2 robot: it
     takes /cmd_vel and publishes /clock, /odom, /tf, /tf_static and /joint_states, until the scenario's duration,
-    Ctrl-C or SIGTERM; then it scores the run against the scenario's reference into a run folder, as `ddtrack run`
-    does. Exit 1: the run failed, or (lockstep) the driver stopped answering."""
+    Ctrl-C or SIGTERM; then it scores the run against the reference (the scenario's, or --path-topic's) into a run
+    folder, as `ddtrack run` does. Exit 1: the run failed, or (lockstep) the driver stopped answering."""
     from ..ros.robot import MODES, Options, run_robot
 
     if mode not in MODES:
@@ -81,8 +88,11 @@ def robot(
     from ..outdir import check_output, staged_folder
 
     check_output(folder, command="run", overwrite=overwrite)  # before the robot goes live
-    options = Options(mode=mode, timeout=timeout, start=origin, twist_stamped=twist_stamped, domain=domain)
+    options = Options(
+        mode=mode, timeout=timeout, start=origin, twist_stamped=twist_stamped, domain=domain, path_topic=path_topic
+    )
     live = run_robot(spec, options, on_ready=lambda line: click.echo(line, err=True))
+    spec = live.scenario or spec  # a path's reference: the run folder describes what was scored
     from ..rundir import write_run
 
     with staged_folder(folder, command="run") as stage:  # a run folder as `ddtrack run` writes it

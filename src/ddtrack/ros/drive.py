@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import signal
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -141,32 +140,11 @@ def refuse_torque_law(scenario: Any) -> None:
 
 def path_scenario(data: dict[str, Any], path_message: Any, topic: str, base_dir: Path) -> Any:
     """The scenario with its trajectory replaced by a received Path, re-timed exactly as ``ddtrack import`` does
-    (the Path goes through a bag and :func:`~ddtrack.ros.references.reference_from_path`)."""
+    (:func:`~ddtrack.ros.references.reference_from_path_message`); the robot starts where it is."""
     from ..scenario.files import validate_scenario
-    from .references import reference_from_path
+    from .references import path_scenario_data, reference_from_path_message
 
-    poses = list(path_message.poses)
-    finite = all(math.isfinite(p.pose.position.x) and math.isfinite(p.pose.position.y) for p in poses)
-    if not finite:
-        raise ConfigError("--path-topic", f"the path on '{topic}' has a NaN or infinite position", "")
-    if len(poses) < 2:
-        raise ConfigError("--path-topic", f"the path on '{topic}' has {len(poses)} poses", "a path needs two")
-    with tempfile.TemporaryDirectory(prefix="ddtrack-drive-") as scratch:
-        bag = Path(scratch) / "path.mcap"
-        write_bag(bag, [(topic, PATH_TYPE, 1, path_message)])
-        reference = reference_from_path(bag, topic)
-    columns = reference.columns
-    duration = float(columns["t"][-1])
-    data = dict(data)
-    data["trajectory"] = {
-        "kind": "waypoints",
-        "points": [[float(x), float(y)] for x, y in zip(columns["x"], columns["y"], strict=True)],
-        "times": [float(t) for t in columns["t"]],
-        "yaws": [float(yaw) for yaw in columns["yaw"]],
-    }
-    simulation = dict(data.get("simulation", {}))
-    simulation.update(duration=duration, metric_window=[0.0, duration])
-    data["simulation"] = simulation
+    data = path_scenario_data(data, reference_from_path_message(path_message, topic))
     data.pop("initial", None)  # the robot starts where it is
     return validate_scenario(data, base_dir=base_dir)
 

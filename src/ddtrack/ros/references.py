@@ -7,10 +7,12 @@ from the first pose.
 
 from __future__ import annotations
 
+import math
+import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 import numpy as np
 
@@ -132,3 +134,43 @@ def write_reference_csv(reference: ImportedReference, file: IO[bytes], *, commen
     lines.append(",".join(names))
     lines.extend(",".join(map(repr, map(float, row))) for row in table)
     file.write(("\n".join(lines) + "\n").encode())
+
+
+def reference_from_path_message(path_message: Any, topic: str) -> ImportedReference:
+    """A received ``nav_msgs/msg/Path`` as a timed reference, re-timed exactly as ``ddtrack import`` does: the message
+    goes through a temporary bag and :func:`reference_from_path`, so a live path and an imported one cannot differ.
+
+    Refuses, naming ``--path-topic``, a path with a NaN or infinite position or with fewer than two poses (a live
+    path is checked before the bag, so the refusal names the topic as the user gave it).
+    """
+    from .export import write_bag  # export imports much of ros/; imported here, not at load
+
+    poses = list(path_message.poses)
+    finite = all(math.isfinite(p.pose.position.x) and math.isfinite(p.pose.position.y) for p in poses)
+    if not finite:
+        raise ConfigError("--path-topic", f"the path on '{topic}' has a NaN or infinite position", "")
+    if len(poses) < 2:
+        raise ConfigError("--path-topic", f"the path on '{topic}' has {len(poses)} poses", "a path needs two")
+    with tempfile.TemporaryDirectory(prefix="ddtrack-path-") as scratch:
+        bag = Path(scratch) / "path.mcap"
+        write_bag(bag, [(topic, PATH_TYPE, 1, path_message)])
+        return reference_from_path(bag, topic)
+
+
+def path_scenario_data(data: dict[str, Any], reference: ImportedReference) -> dict[str, Any]:
+    """A scenario's data (a dict as ``model_dump(mode="json")`` gives it) with its trajectory replaced by a timed
+    ``reference`` (waypoints at its stamps and yaws), its duration and metric window the reference's whole span: the
+    run then follows, and is scored against, the path. Everything else is kept, the ``[initial]`` section included."""
+    columns = reference.columns
+    duration = float(columns["t"][-1])
+    data = dict(data)
+    data["trajectory"] = {
+        "kind": "waypoints",
+        "points": [[float(x), float(y)] for x, y in zip(columns["x"], columns["y"], strict=True)],
+        "times": [float(t) for t in columns["t"]],
+        "yaws": [float(yaw) for yaw in columns["yaw"]],
+    }
+    simulation = dict(data.get("simulation", {}))
+    simulation.update(duration=duration, metric_window=[0.0, duration])
+    data["simulation"] = simulation
+    return data

@@ -8,7 +8,8 @@ else the true pose. Then it holds a velocity command over the period and advance
 Which command it holds is the mode's (docs/ros.md): the latest received (``realtime``, ``fast``) or the first
 received after the publication (``lockstep``, deterministic). After the last period it publishes the final state
 x_N too (a driver then sees the reference's end). The run is scored like ``ddtrack run``'s: the
-scenario's reference against the true pose, into a run folder.
+reference against the true pose, into a run folder; the reference is the scenario's, or with a path topic the first
+``nav_msgs/msg/Path`` received on it, re-timed as ``ddtrack import`` does.
 """
 
 from __future__ import annotations
@@ -62,6 +63,9 @@ class LiveRun:
         answering) or ``"failed"`` (the run diverged or went non-finite).
     late : int
         Realtime periods that started later than one period after their deadline.
+    scenario : Scenario or None
+        The scenario run, when it is not the one given (a path topic's reference replaced its trajectory): the run
+        folder must describe what was scored.
     """
 
     columns: dict
@@ -69,6 +73,7 @@ class LiveRun:
     periods: int
     ended: str
     late: int = 0
+    scenario: Scenario | None = None
 
 
 @dataclass
@@ -238,6 +243,9 @@ class Options:
         The DDS domain (None: ``ROS_DOMAIN_ID``, else 0).
     frames : Frames
         The world and body frames (``odom``, ``base_link``).
+    path_topic : str or None
+        A ``nav_msgs/msg/Path`` topic whose first message, awaited up to ``timeout`` before the first period,
+        replaces the scenario's reference (None: the scenario's).
     """
 
     mode: str = "lockstep"
@@ -246,6 +254,7 @@ class Options:
     twist_stamped: bool = False
     domain: int | None = None
     frames: Frames = field(default_factory=Frames)
+    path_topic: str | None = None
 
 
 @contextmanager
@@ -283,7 +292,7 @@ def run_robot(scenario: Scenario, options: Options, *, on_ready: Callable[[str],
     scenario : Scenario
         A validated scenario whose plant takes velocity commands.
     options : Options
-        The mode, the lockstep timeout, the start stamp, the command type and the DDS domain.
+        The mode, the lockstep timeout, the start stamp, the command type, the DDS domain and the path topic.
     on_ready : callable
         Called with a line once the robot is on the network (before the first period).
 
@@ -292,10 +301,14 @@ def run_robot(scenario: Scenario, options: Options, *, on_ready: Callable[[str],
     LiveRun
         The run's columns and metrics and how it ended.
     """
-    robot = Robot(scenario)
     frames = options.frames
     stamped = options.twist_stamped
-    with Participant(options.domain) as node:
+    given = scenario
+    stop = [False]
+    with Participant(options.domain) as node, _stop_on_signals(stop):
+        if options.path_topic is not None:  # before the robot is built: the path sets its duration
+            scenario = _await_path(scenario, node, options.path_topic, options.timeout, stop)
+        robot = Robot(scenario)
         clock = node.publisher("/clock", CLOCK)
         odometry = node.publisher("/odom", ODOMETRY)
         transforms = node.publisher("/tf", TF)
@@ -308,21 +321,51 @@ def run_robot(scenario: Scenario, options: Options, *, on_ready: Callable[[str],
             origin = time.time_ns() if options.mode == "realtime" else 0
         fixed = [_transform(origin, frames.base, f.child, (f.x, f.y, f.z)) for f in viewer.fixed]
         static.publish(message(TF, transforms=fixed))
-        stop = [False]
-        with _stop_on_signals(stop):
-            if options.mode == "lockstep":  # a driver that is not matched yet would miss period 0
-                deadline = time.monotonic() + max(options.timeout, 10.0)
-                while not stop[0] and time.monotonic() < deadline:
-                    if commands.publishers() and (clock.subscriptions() or odometry.subscriptions()):
-                        break
-                    time.sleep(0.01)
-                time.sleep(SETTLE)  # the driver's side discovers the robot's writers too
-            on_ready(f"robot on DDS domain {node.domain}: /cmd_vel in; /clock, /odom, /tf, /joint_states out")
-            ended, late = _loop(robot, options, origin, stop, clock, odometry, transforms, joints, commands)
+        if options.mode == "lockstep":  # a driver that is not matched yet would miss period 0
+            deadline = time.monotonic() + max(options.timeout, 10.0)
+            while not stop[0] and time.monotonic() < deadline:
+                if commands.publishers() and (clock.subscriptions() or odometry.subscriptions()):
+                    break
+                time.sleep(0.01)
+            time.sleep(SETTLE)  # the driver's side discovers the robot's writers too
+        on_ready(f"robot on DDS domain {node.domain}: /cmd_vel in; /clock, /odom, /tf, /joint_states out")
+        ended, late = _loop(robot, options, origin, stop, clock, odometry, transforms, joints, commands)
     columns, metrics = robot.result()
     if robot.record.status != 0:
         ended = "failed"
-    return LiveRun(columns, metrics, len(robot.record.rows), ended, late)
+    return LiveRun(columns, metrics, len(robot.record.rows), ended, late, None if scenario is given else scenario)
+
+
+def _await_path(scenario: Scenario, node: Participant, topic: str, timeout: float, stop: list[bool]) -> Scenario:
+    """``scenario`` scored against the first ``nav_msgs/msg/Path`` received on ``topic`` within ``timeout`` [s].
+
+    Two subscriptions, both reliable: a transient-local one (:data:`TF_STATIC_QOS`, keep last 1) receives a
+    planner's latched path, published before the robot started; a volatile one (:data:`DEFAULT_QOS`) matches a
+    volatile publisher too, which a transient-local subscription does not (DDS refuses a writer offering less
+    durability than the reader requests). The path is re-timed as ``ddtrack import`` re-times it; the start pose
+    stays the scenario's (its ``[initial] pose``, else its own reference's pose at t = 0), as a robot's would.
+    """
+    from pathlib import Path
+
+    from ..scenario.files import validate_scenario
+    from .references import PATH_TYPE, path_scenario_data, reference_from_path_message
+
+    readers = [node.subscriber(topic, PATH_TYPE, qos=qos) for qos in (TF_STATIC_QOS, DEFAULT_QOS)]
+    deadline = time.monotonic() + timeout
+    while not stop[0] and time.monotonic() < deadline:
+        for reader in readers:
+            if received := reader.wait(POLL / len(readers)):
+                reference = reference_from_path_message(received[0], topic)
+                data = path_scenario_data(scenario.model_dump(mode="json"), reference)
+                pose = scenario.initial.pose
+                if pose is None:
+                    ref0 = scenario.trajectory.build()(0.0)
+                    pose = (float(ref0.x), float(ref0.y), float(ref0.theta))
+                data["initial"] = dict(data.get("initial") or {}, pose=[float(value) for value in pose])
+                return validate_scenario(data, base_dir=Path("."))
+    if stop[0]:
+        raise RunError(f"stopped while waiting for a {PATH_TYPE} on '{topic}'")
+    raise ConfigError("--path-topic", f"no {PATH_TYPE} on '{topic}' within {timeout:g} s", "")
 
 
 def _loop(robot: Robot, options: Options, origin: int, stop: list[bool], *topics: Any) -> tuple[str, int]:
