@@ -81,6 +81,19 @@ def command_type(given: str | None, twist_stamped: bool) -> str:
     help="wall: a period timer using the latest odometry; odom: one command per new odometry stamp (lockstep "
     "with a simulated robot), t = stamp - first stamp.",
 )
+@click.option(
+    "--effort-topic",
+    metavar="TOPIC",
+    help="For a torque-output law: publish its wheel torques [N m] here as std_msgs/Float64MultiArray (a ros2_control "
+    "JointGroupEffortController's /<controller>/commands), clamped to max_torque; no /cmd_vel.",
+)
+@click.option(
+    "--joints",
+    default="wheel_left_joint,wheel_right_joint",
+    show_default=True,
+    metavar="LEFT,RIGHT",
+    help="The effort controller's joints parameter, in its order (names saying left and right).",
+)
 @click.option("--dry-run", is_flag=True, help="Compute and record the commands without publishing them.")
 @click.option(
     "--wait",
@@ -107,6 +120,8 @@ def drive(
     twist_stamped: bool,
     odom_timeout: float,
     clock: str,
+    effort_topic: str | None,
+    joints: str,
     dry_run: bool,
     wait: float,
     domain: int | None,
@@ -116,10 +131,12 @@ def drive(
 ) -> int:
     """Drive a ROS 2 robot live with SCENARIO's velocity-output controller: odometry in, /cmd_vel out at the
     control period, clamped to the scenario's limits; a zero twist on stale odometry, at the reference's end and
-    on Ctrl-C or SIGTERM. What it saw and sent is recorded as an MCAP bag."""
+    on Ctrl-C or SIGTERM. A torque-output law needs --effort-topic: its wheel torques go to a ros2_control effort
+    controller (zero torques where a zero twist would go). What it saw and sent is recorded as an MCAP bag."""
     from ..ros.dds import dds_topic_name
     from ..ros.drive import DriveOptions, refuse_torque_law
     from ..ros.drive import drive as drive_robot
+    from ..ros.effort import wheel_sides
     from ..scenario import load_scenario
 
     msgtype = command_type(cmd_vel_type, twist_stamped)
@@ -127,11 +144,14 @@ def drive(
         if not frame.strip("/") or any(c.isspace() for c in frame):
             raise ConfigError(option, f"'{frame}' is not a frame id (give a name like odom or base_footprint)")
     spec = load_scenario(scenario, overrides=overrides)
-    refuse_torque_law(spec)
+    refuse_torque_law(spec, effort_topic)
+    joint_names = tuple(name.strip() for name in joints.split(","))
+    wheel_sides(joint_names)
     for option, topic in (
         ("--odom-topic", odom_topic),
         ("--cmd-vel-topic", cmd_vel_topic),
         ("--path-topic", path_topic),
+        ("--effort-topic", effort_topic),
     ):
         if topic is not None:
             try:
@@ -160,6 +180,8 @@ def drive(
         dry_run=dry_run,
         wait=wait,
         domain=domain,
+        effort_topic=effort_topic,
+        joints=joint_names,
     )
     summary = drive_robot(spec, options, target)
     for line in summary.lines():

@@ -4,8 +4,9 @@ It reads odometry (``nav_msgs/msg/Odometry``, or the pose of one ``/tf`` transfo
 the scenario's reference or a planner's path, and publishes ``/cmd_vel`` once per control period, on the wall clock
 (a period timer using the latest odometry) or in lockstep with a simulated robot (one command per new odometry
 stamp). Safety first: a zero twist when the odometry is stale, at the reference's end, on SIGINT and on SIGTERM;
-every command clamped to the scenario's limits. What it saw and sent is written as an MCAP bag when it stops,
-however it stops.
+every command clamped to the scenario's limits. A torque-output law publishes wheel torques to a ros2_control
+effort controller instead (``--effort-topic``, ``ddtrack.ros.effort``; its zero command is zero torques). What it
+saw and sent is written as an MCAP bag when it stops, however it stops.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .dds import DEFAULT_QOS, SENSOR_DATA_QOS, Participant
+from .effort import DEFAULT_JOINTS, EFFORT_TYPE, effort_message, torque_limit, wheel_sides
 from .export import write_bag
 from .messages import NANOSECONDS, header, message, planar_pose, quaternion_yaw, stamp_nanoseconds, twist
 from .poses import TF_QOS, TF_TOPIC, TF_TYPE, TfOdometry
@@ -64,6 +66,11 @@ class DriveOptions:
         [s] to wait for the first odometry (and path) before giving up.
     domain : int or None
         The DDS domain (``ROS_DOMAIN_ID`` when None).
+    effort_topic : str or None
+        Publish a torque-output law's wheel torques here as ``std_msgs/msg/Float64MultiArray`` (a ros2_control
+        ``JointGroupEffortController``'s ``/<controller>/commands``) instead of /cmd_vel (``ddtrack.ros.effort``).
+    joints : tuple of str
+        The effort controller's ``joints`` parameter, in its order: which entry is the right wheel, which the left.
     """
 
     odom_topic: str = "/odom"
@@ -78,6 +85,8 @@ class DriveOptions:
     dry_run: bool = False
     wait: float = 30.0
     domain: int | None = None
+    effort_topic: str | None = None
+    joints: tuple[str, ...] = DEFAULT_JOINTS
 
 
 @dataclass
@@ -124,17 +133,26 @@ def speed_limits(scenario: Any) -> tuple[float | None, float | None]:
     return (top_v if v is None else float(v)), (top_w if w is None else float(w))
 
 
-def refuse_torque_law(scenario: Any) -> None:
-    """Refuse a law whose output is wheel torques: no standard ROS 2 topic carries them to a robot's base."""
+def refuse_torque_law(scenario: Any, effort_topic: str | None = None) -> None:
+    """Refuse a law whose output does not fit the topic: wheel torques reach a robot only through a ros2_control
+    effort controller (``--effort-topic``), and a velocity law's (v, omega) are no efforts."""
     from ..scenario import controller_output
 
-    if controller_output(scenario.controller) == "torque":
-        inner = getattr(scenario.controller, "inner", None)
-        how = f" (inner = '{inner}')" if inner else ""
+    torque = controller_output(scenario.controller) == "torque"
+    inner = getattr(scenario.controller, "inner", None)
+    how = f" (inner = '{inner}')" if inner else ""
+    if torque and effort_topic is None:
         raise ConfigError(
             "controller",
             f"'{scenario.controller.kind}'{how} outputs wheel torques, and no standard ROS 2 topic carries wheel "
-            "torques to a robot: drive needs a velocity-output law (inner = 'none', or a cmd_vel controller)",
+            "torques to a robot: name a ros2_control effort controller's command topic with --effort-topic, or "
+            "drive a velocity-output law (inner = 'none', or a cmd_vel controller)",
+        )
+    if not torque and effort_topic is not None:
+        raise ConfigError(
+            "--effort-topic",
+            f"'{scenario.controller.kind}'{how} outputs (v, omega), not wheel torques: drop --effort-topic to "
+            "publish them on /cmd_vel, or give a torque-output law (e.g. inner = 'computed_torque')",
         )
 
 
@@ -205,7 +223,13 @@ class Driver:
             self.poses = None
             self.odometry = node.subscriber(options.odom_topic, ODOMETRY_TYPE, qos=SENSOR_DATA_QOS)
         msgtype = TWIST_STAMPED_TYPE if options.twist_stamped else TWIST_TYPE
-        self.commands = None if options.dry_run else node.publisher(options.cmd_vel_topic, msgtype, qos=DEFAULT_QOS)
+        self.sides: tuple[int, int] | None = None  #: (right, left) indices of the joints: effort mode
+        topic = options.cmd_vel_topic
+        if options.effort_topic is not None:  # wheel torques, and no /cmd_vel at all
+            self.sides, self.limits = wheel_sides(options.joints), (torque_limit(scenario),) * 2
+            topic, msgtype = options.effort_topic, EFFORT_TYPE
+        self.command_topic = topic
+        self.commands = None if options.dry_run else node.publisher(topic, msgtype, qos=DEFAULT_QOS)
         self._next_report = 0.0
 
     def body(self, odom: Any) -> np.ndarray:
@@ -217,7 +241,8 @@ class Driver:
         )
 
     def command(self, t: float, y: np.ndarray, nanoseconds: int) -> tuple[float, float]:
-        """The clamped command at reference time ``t`` for the measured ``y``; records the reference and e_tr."""
+        """The clamped command at reference time ``t`` for the measured ``y``, (v, omega) or in effort mode
+        (tau_r, tau_l) clamped to the torque limit; records the reference and e_tr."""
         ref = self._reference(t)
         if self.memory is None:
             self.memory = self._controller.init(y, ref, self._key)
@@ -236,20 +261,24 @@ class Driver:
         )
         self.recorded.append(("/reference", POSE_STAMPED_TYPE, nanoseconds, pose))
         if t >= self._next_report:
-            self.log(f"t = {t:6.2f} s  e_tr = {error:.4f} m  v = {v:+.3f} m/s  omega = {omega:+.3f} rad/s")
+            a, b = (("tau_r", "N m"), ("tau_l", "N m")) if self.sides else (("v", "m/s"), ("omega", "rad/s"))
+            self.log(f"t = {t:6.2f} s  e_tr = {error:.4f} m  {a[0]} = {v:+.3f} {a[1]}  {b[0]} = {omega:+.3f} {b[1]}")
             self._next_report = t + REPORT_EVERY
         return v, omega
 
     def send(self, v: float, omega: float, nanoseconds: int, *, final: bool = False) -> None:
-        """Publish (unless a dry run) and record one command (the final zero twist is not counted)."""
+        """Publish (unless a dry run) and record one command (the final zero twist is not counted); in effort mode
+        ``v, omega`` are (tau_r, tau_l) and go out as the effort controller's Float64MultiArray."""
         body = twist(v, omega)
-        if self.options.twist_stamped:
+        if self.sides is not None:
+            outgoing = effort_message(v, omega, self.sides)
+        elif self.options.twist_stamped:
             outgoing = message(TWIST_STAMPED_TYPE, header=header(nanoseconds, self.frames[1]), twist=body)
         else:
             outgoing = body
         if self.commands is not None:
             self.commands.publish(outgoing)
-        self.recorded.append((self.options.cmd_vel_topic, outgoing.__msgtype__, nanoseconds, outgoing))
+        self.recorded.append((self.command_topic, outgoing.__msgtype__, nanoseconds, outgoing))
         self.summary.commands += not final
 
     def halt(self) -> None:
@@ -382,7 +411,7 @@ def drive(scenario: Any, options: DriveOptions, bag: Path, *, log: Callable[[str
         Commands sent, tracking errors, missed periods, jitter and how it ended.
     """
     say = log if log is not None else (lambda line: print(line, file=sys.stderr, flush=True))
-    refuse_torque_law(scenario)
+    refuse_torque_law(scenario, options.effort_topic)
     with Stop() as stop, Participant(options.domain) as node:
         if options.path_topic is not None:
             scenario = _await_path(scenario, options, node, stop)
