@@ -31,7 +31,18 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
     live, offline = tmp_path / "live", tmp_path / "offline"
     commands = [
         [sys.executable, "-m", "ddtrack", "robot", str(FIGURE8), "--mode", "lockstep", *TIMING, "--out", str(live)],
-        [sys.executable, "-m", "ddtrack", "drive", str(FIGURE8), "--clock", "odom", *TIMING, "--out", str(tmp_path)],
+        [
+            sys.executable,
+            "-m",
+            "ddtrack",
+            "drive",
+            str(FIGURE8),
+            "--clock",
+            "odom",
+            *TIMING,
+            "--out",
+            str(tmp_path / "drive"),
+        ],
     ]
     started = [
         subprocess.Popen(c, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for c in commands
@@ -64,7 +75,11 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
         assert done.returncode == 0, done.stderr[-3000:]
         return done.stdout + done.stderr
 
-    fitted = ddtrack("identify", str(tmp_path / "drive.mcap"))
+    fitted = ddtrack("identify", str(tmp_path / "drive" / "drive.mcap"))
     assert 'model = "lag"' in fitted and "fit on the held-out last quarter" in fitted
     assert "wrote" in ddtrack("export", str(live), "--to", str(tmp_path / "live.mcap"))
     assert (tmp_path / "live.mcap").stat().st_size > 0
+    # and drive's own run folder: the odometry it received scored against the reference, which export reads too
+    driven = json.loads((tmp_path / "drive" / "metrics.json").read_text())
+    assert driven["warnings"][0]["code"] == "measured_pose" and driven["e_tr_mean"] > 0
+    assert "wrote" in ddtrack("export", str(tmp_path / "drive"), "--to", str(tmp_path / "drive.csv"))

@@ -2,12 +2,38 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import Any
 
 import click
 
 from ..errors import ConfigError
 from . import cli, folder_name, overwrite_option
+
+
+def write_drive_folder(spec: Any, summary: Any, folder: Path, recording: Path | None, *, effort: bool) -> None:
+    """The drive's run folder (:func:`ddtrack.ros.measured.measured_run`), with ``recording`` (the default bag)
+    moved in as ``drive.mcap``; the bag alone in ``folder`` when no command was computed."""
+    from ..outdir import staged_folder
+    from ..ros.measured import measured_run
+    from ..rundir import write_run
+
+    if not summary.rows:
+        if recording is not None and recording.exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            os.replace(recording, folder / "drive.mcap")
+        return
+    commands = ("tau_r", "tau_l") if effort else ("v_cmd", "omega_cmd")
+    columns, metrics = measured_run(spec, summary.rows, commands=commands)
+    with staged_folder(folder, command="run") as stage:
+        write_run(stage, spec, columns, metrics)
+        if recording is not None and recording.exists():
+            os.replace(recording, stage / "drive.mcap")
+    mean = metrics.get("e_tr_mean")
+    error = "no e_tr (the drive ended before the metric window)" if mean is None else f"e_tr mean {mean:.4g} m"
+    click.echo(f"wrote {folder}: the run as the odometry measured it, {error}", err=True)
+
 
 #: what --cmd-vel-type accepts: the two messages a ROS 2 base takes its velocity commands in
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
@@ -105,7 +131,12 @@ def command_type(given: str | None, twist_stamped: bool) -> str:
 )
 @click.option("--domain", type=click.IntRange(min=0), help="DDS domain [default: ROS_DOMAIN_ID, else 0].")
 @click.option("--bag", type=click.Path(path_type=Path), metavar="FILE.mcap", help="[default: OUT/drive.mcap].")
-@click.option("--out", type=click.Path(path_type=Path), help="Folder of the bag [default: runs/NAME_drive].")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    help="The run folder: what the odometry measured against the reference, as `ddtrack run` writes one, and the "
+    "bag [default: runs/NAME_drive].",
+)
 @overwrite_option
 def drive(
     scenario: Path,
@@ -132,7 +163,8 @@ def drive(
     """Drive a ROS 2 robot live with SCENARIO's velocity-output controller: odometry in, /cmd_vel out at the
     control period, clamped to the scenario's limits; a zero twist on stale odometry, at the reference's end and
     on Ctrl-C or SIGTERM. A torque-output law needs --effort-topic: its wheel torques go to a ros2_control effort
-    controller (zero torques where a zero twist would go). What it saw and sent is recorded as an MCAP bag."""
+    controller (zero torques where a zero twist would go). What it saw and sent is recorded as an MCAP bag, and
+    scored as a run folder (the measured pose against the reference) that report and export read."""
     from ..ros.dds import dds_topic_name
     from ..ros.drive import DriveOptions, refuse_torque_law
     from ..ros.drive import drive as drive_robot
@@ -158,15 +190,15 @@ def drive(
                 dds_topic_name(topic)
             except ConfigError as exc:
                 raise ConfigError(option, f"{exc.message} (give a name like /odom)") from None
-    target = (
-        bag
-        if bag is not None
-        else (out if out is not None else Path("runs") / folder_name(f"{spec.name}_drive")) / "drive.mcap"
-    )
+    from ..outdir import check_output
+
+    folder = out if out is not None else Path("runs") / folder_name(f"{spec.name}_drive")
+    target = bag if bag is not None else folder / "drive.mcap"
     if target.suffix.lower() != ".mcap":
         raise ConfigError("--bag", f"'{target}' is not an .mcap file", "give FILE.mcap")
-    if target.exists() and not overwrite:
+    if bag is not None and target.exists() and not overwrite:
         raise ConfigError("--bag", f"'{target}' exists", "give a new file, or add --overwrite to replace it")
+    check_output(folder, command="run", overwrite=overwrite)  # before the robot moves
     options = DriveOptions(
         odom_topic=odom_topic,
         cmd_vel_topic=cmd_vel_topic,
@@ -183,9 +215,13 @@ def drive(
         effort_topic=effort_topic,
         joints=joint_names,
     )
-    summary = drive_robot(spec, options, target)
+    # the default bag goes into the run folder, which is swapped in whole at the end: written beside it meanwhile
+    recording = target if bag is not None else folder.parent / f".{folder.name}.drive.mcap"
+    recording.parent.mkdir(parents=True, exist_ok=True)
+    summary = drive_robot(spec, options, recording)
     for line in summary.lines():
         click.echo(line, err=True)
+    write_drive_folder(spec, summary, folder, recording if bag is None else None, effort=effort_topic is not None)
     if summary.counts:
         topics = ", ".join(f"{topic} {count}" for topic, count in summary.counts.items())
         click.echo(f"wrote {target}: {topics}")

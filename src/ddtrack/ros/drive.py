@@ -100,6 +100,7 @@ class DriveSummary:
     jitter: list[float] = field(default_factory=list)  #: wall clock: |actual - nominal| period [s]
     ended: str = "the reference's end"
     counts: dict[str, int] = field(default_factory=dict)  #: messages in the bag, by topic
+    rows: list[tuple] = field(default_factory=list)  #: (t, y, reference, command) of each command: the run folder's
 
     def lines(self) -> list[str]:
         """The end-of-drive summary, in plain lines."""
@@ -256,6 +257,7 @@ class Driver:
         x_ref, y_ref, theta_ref = float(ref.x), float(ref.y), float(ref.theta)
         error = math.hypot(y[0] - x_ref, y[1] - y_ref)
         self.summary.errors.append(error)
+        self.summary.rows.append((t, np.array(y), (x_ref, y_ref, theta_ref, float(ref.v), float(ref.omega)), v, omega))
         pose = message(
             POSE_STAMPED_TYPE, header=header(nanoseconds, self.frames[0]), pose=planar_pose(x_ref, y_ref, theta_ref)
         )
