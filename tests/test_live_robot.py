@@ -160,7 +160,7 @@ DRIVER = textwrap.dedent(
         if not new:
             time.sleep(0.0005)
             continue
-        while not commands.get_matched_subscriptions():  # the robot's subscription, before the first answer
+        while answered == 0 and not commands.get_matched_subscriptions():  # before the first answer only
             time.sleep(0.005)
         for sample in new:
             got.append(sample.clock.sec * 10**9 + sample.clock.nanosec)

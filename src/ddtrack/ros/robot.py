@@ -44,6 +44,8 @@ POLL = 0.1
 #: [s] lockstep waits this long once matched: a reader that has not yet discovered the robot's writer drops what
 #: it sends (volatile), and period 0's /clock would go unanswered
 SETTLE = 0.5
+#: [s] how long the robot stays after publishing its final state, so that a best-effort reader receives it
+LINGER = 0.2
 
 
 @dataclass
@@ -406,7 +408,10 @@ def _loop(robot: Robot, options: Options, origin: int, stop: list[bool], *topics
                 effort=np.zeros(0),
             )
         )
-        if robot.finished:  # x_N published too, so a driver sees the reference's end
+        if robot.finished:  # x_N published too, so a driver sees the reference's end: delivered before we leave
+            for publisher in (clock, odometry):
+                publisher.flush(timeout=1.0)  # reliable subscriptions acknowledge it
+            time.sleep(LINGER)  # a best-effort one (drive's) has no acknowledgement to wait for
             return "done", late
         if mode == "lockstep":
             command = _first_command(commands, options.timeout, stop)
