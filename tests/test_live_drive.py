@@ -17,6 +17,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import pyarrow.parquet as pq
 import pytest
 from test_dds import LOOPBACK, PLAIN_NODE
 
@@ -76,13 +77,14 @@ FAKE_ROBOT = _TYPES + textwrap.dedent(
 
     config = json.loads(sys.argv[1])
     EFFORT = config.get("effort")  # wheel torques on a Float64MultiArray, in the joint order of EFFORT["joints"]
-    COMMAND = Float64MultiArray if EFFORT else TwistStamped if config.get("stamped") else Twist
+    WHEELS = config.get("wheels")  # wheel speeds [rad/s] likewise, turned by wheels of WHEELS' radius and half axle
+    COMMAND = Float64MultiArray if EFFORT or WHEELS else TwistStamped if config.get("stamped") else Twist
     period, (x, y, theta) = config["period"], config["pose"]
     QOS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
     participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
     POSES = ("rt/tf", TFMessage) if config.get("tf") else ("rt/odom", Odometry)  # the pose as a transform, or odometry
     odom = DataWriter(participant, Topic(participant, *POSES), qos=QOS)
-    COMMANDS = "rt" + EFFORT["topic"] if EFFORT else "rt/cmd_vel"
+    COMMANDS = "rt" + (EFFORT or WHEELS)["topic"] if EFFORT or WHEELS else "rt/cmd_vel"
     commands = DataReader(participant, Topic(participant, COMMANDS, COMMAND), qos=QOS)
     deadline = time.monotonic() + 20
     while not (odom.get_matched_subscriptions() and commands.get_matched_publications()):
@@ -134,6 +136,14 @@ FAKE_ROBOT = _TYPES + textwrap.dedent(
             if got:
                 data = got[-1].data
                 tau[:] = [data[EFFORT["joints"].index("right")], data[EFFORT["joints"].index("left")]]
+            return got
+        if WHEELS:  # the unicycle of these wheels: v = r (right + left) / 2, omega = r (right - left) / (2 L)
+            for s in got:
+                received.append([time.monotonic(), *s.data])
+            if got:
+                data, r, half = got[-1].data, WHEELS["radius"], WHEELS["half_axle"]
+                right, left = data[WHEELS["joints"].index("right")], data[WHEELS["joints"].index("left")]
+                v, omega = r * (right + left) / 2, r * (right - left) / (2 * half)
             return got
         got = [s.twist if config.get("stamped") else s for s in got]
         for s in got:
@@ -401,6 +411,11 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, monkeypatch):
         [str(FIGURE8), "--effort-topic", "/wheels/commands", "--bag", str(tmp_path / "x.mcap")], domain
     )
     assert err.startswith("error: --effort-topic:") and "not wheel torques" in err
+    err = _one_line_error([str(PAPER_LINE), "--wheel-velocity-topic", "/w", "--bag", str(tmp_path / "x.mcap")], domain)
+    assert err.startswith("error: --wheel-velocity-topic:") and "not speeds" in err and "--effort-topic" in err
+    both = ["--effort-topic", "/e", "--wheel-velocity-topic", "/w", "--bag", str(tmp_path / "x.mcap")]
+    err = _one_line_error([str(PAPER_LINE), *both], domain)
+    assert err.startswith("error: --wheel-velocity-topic: cannot be combined with --effort-topic")
     err = _one_line_error(
         [str(PAPER_LINE), "--effort-topic", "/e", "--joints", "a,b", "--bag", str(tmp_path / "x.mcap")], domain
     )
@@ -465,3 +480,57 @@ def test_effort_topic_drives_a_torque_law_in_lockstep(tmp_path):
     topics = _bag_topics(bag)
     assert sorted(topics) == ["/odom", "/reference", "/wheels/commands"]  # and no /cmd_vel
     assert len(topics["/wheels/commands"]) == steps and list(topics["/wheels/commands"][-1].data) == [0.0, 0.0]
+
+
+def test_wheel_velocity_topic_drives_a_velocity_law_in_lockstep(tmp_path):
+    """The figure eight's kinematic backstepping, its (v, omega) as wheel speeds on a Float64MultiArray to a robot
+    that turns its wheels at them: the scenario's true wheels (radius 0.033 m where the law believes 0.03333 m),
+    joints given left first (a TurtleBot's order, where the effort test gives right first)."""
+    from ddtrack.scenario import load_scenario
+
+    scenario = load_scenario(FIGURE8)
+    duration, period, domain = 5.0, float(scenario.simulation.control_period), _domain(8)
+    reference = scenario.trajectory.build()
+    start = reference(0.0)
+    true, believed = scenario.plant_params(), scenario.robot
+    steps = round(duration / period) + 1
+    wheels = {"topic": "/wheels/commands", "joints": ["left", "right"]}
+    wheels |= {"radius": true.wheel_radius, "half_axle": true.half_axle}
+    pose = [float(start.x), float(start.y), float(start.theta)]
+    robot = _robot({"mode": "lockstep", "period": period, "steps": steps, "pose": pose, "wheels": wheels}, domain)
+    out = tmp_path / "eight"
+    args = ["--clock", "odom", "--wheel-velocity-topic", "/wheels/commands", "--joints", "left_wheel,right_wheel"]
+    sets = ["--set", f"simulation.duration={duration}", "--set", f"simulation.metric_window=[0, {duration}]"]
+    drive = _drive([str(FIGURE8), *args, *sets, "--out", str(out)], domain)
+    (code, _, err), (robot_code, output, robot_err) = _finish(drive, robot)
+    assert code == 0, err[-3000:]
+    assert robot_code == 0, robot_err[-3000:]
+    seen = json.loads(output)
+    assert len(seen["received"]) == steps and seen["received"][-1][1:] == [0.0, 0.0]  # then the wheels stop
+    end = reference(duration)
+    x, y, _ = seen["pose"]
+    # 0.65 mm measured after 5 s (the 1 % wheel radius error is what feedback corrects); a robot that takes the
+    # joints in the other order ends 18.6 mm off
+    assert math.hypot(x - float(end.x), y - float(end.y)) < 0.005
+    # each array is W nu of the command the run folder records, on the wheels the law believes (left first)
+    columns = pq.read_table(out / "timeseries.parquet").to_pydict()
+    radius, half = float(believed.wheel_radius), float(believed.half_axle)
+    for (_, left, right), v, omega in zip(seen["received"], columns["v_cmd"], columns["omega_cmd"], strict=False):
+        assert right == pytest.approx((v + half * omega) / radius, rel=1e-12, abs=1e-12)
+        assert left == pytest.approx((v - half * omega) / radius, rel=1e-12, abs=1e-12)
+    topics = _bag_topics(out / "drive.mcap")
+    assert sorted(topics) == ["/odom", "/reference", "/wheels/commands"]  # and no /cmd_vel
+
+
+def test_wheel_speeds_keep_the_curvature_within_the_wheels_limit():
+    """Two wheels too fast are slowed by one factor (omega / v kept) to the limit; slow ones pass unchanged."""
+    from ddtrack.model import RobotParams
+    from ddtrack.ros.joint_groups import wheel_speeds, within_wheel_limit
+
+    nominal = RobotParams(wheel_radius=0.033, half_axle=0.08)
+    v, omega = within_wheel_limit(0.5, 2.0, nominal, limit=6.0)
+    assert omega / v == pytest.approx(2.0 / 0.5) and max(map(abs, wheel_speeds(v, omega, nominal))) == pytest.approx(
+        6.0
+    )
+    assert within_wheel_limit(0.1, 0.5, nominal, limit=6.0) == (0.1, 0.5)
+    assert within_wheel_limit(5.0, 0.0, nominal, limit=None) == (5.0, 0.0)

@@ -9,7 +9,8 @@ from typing import Any
 import click
 
 from ..errors import ConfigError
-from . import cli, folder_name, overwrite_option
+from . import cli, folder_name
+from .live import live_options
 
 
 def write_drive_folder(spec: Any, summary: Any, folder: Path, recording: Path | None, *, effort: bool) -> None:
@@ -58,13 +59,6 @@ def command_type(given: str | None, twist_stamped: bool) -> str:
 
 @cli.command(short_help="Drive a ROS 2 robot live with SCENARIO's controller (/odom in, /cmd_vel out).")
 @click.argument("scenario", type=click.Path(path_type=Path))
-@click.option(
-    "--set",
-    "overrides",
-    multiple=True,
-    metavar="SECTION.KEY=VALUE",
-    help="Override a scenario value, e.g. --set simulation.duration=20 (repeatable).",
-)
 @click.option("--odom-topic", default="/odom", show_default=True, metavar="TOPIC", help="nav_msgs/Odometry in.")
 @click.option("--cmd-vel-topic", default="/cmd_vel", show_default=True, metavar="TOPIC", help="Commands out.")
 @click.option(
@@ -114,11 +108,18 @@ def command_type(given: str | None, twist_stamped: bool) -> str:
     "JointGroupEffortController's /<controller>/commands), clamped to max_torque; no /cmd_vel.",
 )
 @click.option(
+    "--wheel-velocity-topic",
+    metavar="TOPIC",
+    help="For a velocity-output law: publish its (v, omega) as wheel speeds [rad/s] on the scenario's wheels here, "
+    "as std_msgs/Float64MultiArray (a ros2_control JointGroupVelocityController's /<controller>/commands), both "
+    "scaled down together to the wheels' top speed; no /cmd_vel.",
+)
+@click.option(
     "--joints",
     default="wheel_left_joint,wheel_right_joint",
     show_default=True,
     metavar="LEFT,RIGHT",
-    help="The effort controller's joints parameter, in its order (names saying left and right).",
+    help="The effort or velocity controller's joints parameter, in its order (names saying left and right).",
 )
 @click.option("--dry-run", is_flag=True, help="Compute and record the commands without publishing them.")
 @click.option(
@@ -129,15 +130,11 @@ def command_type(given: str | None, twist_stamped: bool) -> str:
     metavar="SECONDS",
     help="How long to wait for the first odometry (and path).",
 )
-@click.option("--domain", type=click.IntRange(min=0), help="DDS domain [default: ROS_DOMAIN_ID, else 0].")
 @click.option("--bag", type=click.Path(path_type=Path), metavar="FILE.mcap", help="[default: OUT/drive.mcap].")
-@click.option(
-    "--out",
-    type=click.Path(path_type=Path),
-    help="The run folder: what the odometry measured against the reference, as `ddtrack run` writes one, and the "
-    "bag [default: runs/NAME_drive].",
+@live_options(
+    "The run folder: what the odometry measured against the reference, as `ddtrack run` writes one, and the bag "
+    "[default: runs/NAME_drive]."
 )
-@overwrite_option
 def drive(
     scenario: Path,
     overrides: tuple[str, ...],
@@ -152,6 +149,7 @@ def drive(
     odom_timeout: float,
     clock: str,
     effort_topic: str | None,
+    wheel_velocity_topic: str | None,
     joints: str,
     dry_run: bool,
     wait: float,
@@ -163,12 +161,13 @@ def drive(
     """Drive a ROS 2 robot live with SCENARIO's velocity-output controller: odometry in, /cmd_vel out at the
     control period, clamped to the scenario's limits; a zero twist on stale odometry, at the reference's end and
     on Ctrl-C or SIGTERM. A torque-output law needs --effort-topic: its wheel torques go to a ros2_control effort
-    controller (zero torques where a zero twist would go). What it saw and sent is recorded as an MCAP bag, and
+    controller (zero torques where a zero twist would go); --wheel-velocity-topic sends a velocity law's commands
+    to a ros2_control velocity controller as wheel speeds. What it saw and sent is recorded as an MCAP bag, and
     scored as a run folder (the measured pose against the reference) that report and export read."""
     from ..ros.dds import dds_topic_name
     from ..ros.drive import DriveOptions, refuse_torque_law
     from ..ros.drive import drive as drive_robot
-    from ..ros.effort import wheel_sides
+    from ..ros.joint_groups import wheel_sides
     from ..scenario import load_scenario
 
     msgtype = command_type(cmd_vel_type, twist_stamped)
@@ -176,7 +175,7 @@ def drive(
         if not frame.strip("/") or any(c.isspace() for c in frame):
             raise ConfigError(option, f"'{frame}' is not a frame id (give a name like odom or base_footprint)")
     spec = load_scenario(scenario, overrides=overrides)
-    refuse_torque_law(spec, effort_topic)
+    refuse_torque_law(spec, effort_topic, wheel_velocity_topic)
     joint_names = tuple(name.strip() for name in joints.split(","))
     wheel_sides(joint_names)
     for option, topic in (
@@ -184,6 +183,7 @@ def drive(
         ("--cmd-vel-topic", cmd_vel_topic),
         ("--path-topic", path_topic),
         ("--effort-topic", effort_topic),
+        ("--wheel-velocity-topic", wheel_velocity_topic),
     ):
         if topic is not None:
             try:
@@ -213,6 +213,7 @@ def drive(
         wait=wait,
         domain=domain,
         effort_topic=effort_topic,
+        wheel_velocity_topic=wheel_velocity_topic,
         joints=joint_names,
     )
     # the default bag goes into the run folder, which is swapped in whole at the end: written beside it meanwhile

@@ -2,12 +2,42 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import click
 
 from ..errors import ConfigError
 from . import cli, enable_compilation_cache, folder_name, overwrite_option
+
+Command = TypeVar("Command", bound=Callable[..., Any])
+
+
+def live_options(out_help: str) -> Callable[[Command], Command]:
+    """The options every live command shares (``--set``, ``--domain``, ``--out``, ``--overwrite``), one way."""
+
+    def decorate(command: Command) -> Command:
+        for option in reversed(
+            [
+                click.option(
+                    "--set",
+                    "overrides",
+                    multiple=True,
+                    metavar="SECTION.KEY=VALUE",
+                    help="Override a scenario value, e.g. --set simulation.duration=20 (repeatable).",
+                ),
+                click.option(
+                    "--domain", type=click.IntRange(0, 232), help="DDS domain [default: ROS_DOMAIN_ID, else 0]."
+                ),
+                click.option("--out", type=click.Path(path_type=Path), help=out_help),
+                overwrite_option,
+            ]
+        ):
+            command = option(command)
+        return command
+
+    return decorate
 
 
 def _start_nanoseconds(text: str | None) -> int | None:
@@ -53,11 +83,8 @@ def _start_nanoseconds(text: str | None) -> int | None:
     "--start", metavar="SECONDS", help="Stamp of t = 0 [s since the epoch; default: 0, realtime the wall clock]."
 )
 @click.option("--twist-stamped", is_flag=True, help="Take /cmd_vel as TwistStamped instead of Twist.")
-@click.option("--domain", type=click.IntRange(0, 232), help="DDS domain [default: ROS_DOMAIN_ID, else 0].")
-@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override a scenario value.")
 @click.option("--seed", type=click.IntRange(min=0), help="Replace simulation.seed.")
-@click.option("--out", type=click.Path(path_type=Path), help="Run folder [default: runs/NAME].")
-@overwrite_option
+@live_options("Run folder [default: runs/NAME].")
 def robot(
     scenario: Path,
     mode: str,

@@ -5,7 +5,8 @@ the scenario's reference or a planner's path, and publishes ``/cmd_vel`` once pe
 (a period timer using the latest odometry) or in lockstep with a simulated robot (one command per new odometry
 stamp). Safety first: a zero twist when the odometry is stale, at the reference's end, on SIGINT and on SIGTERM;
 every command clamped to the scenario's limits. A torque-output law publishes wheel torques to a ros2_control
-effort controller instead (``--effort-topic``, ``ddtrack.ros.effort``; its zero command is zero torques). What it
+effort controller instead (``--effort-topic``), and a velocity law may publish wheel speeds to a velocity controller
+(``--wheel-velocity-topic``; ``ddtrack.ros.joint_groups``); their zero command is zero torques or speeds. What it
 saw and sent is written as an MCAP bag when it stops, however it stops.
 """
 
@@ -24,8 +25,17 @@ import numpy as np
 
 from ..errors import ConfigError
 from .dds import DEFAULT_QOS, SENSOR_DATA_QOS, Participant
-from .effort import DEFAULT_JOINTS, EFFORT_TYPE, effort_message, torque_limit, wheel_sides
 from .export import write_bag
+from .joint_groups import (
+    ARRAY_TYPE,
+    DEFAULT_JOINTS,
+    torque_limit,
+    wheel_array,
+    wheel_sides,
+    wheel_speed_limit,
+    wheel_speeds,
+    within_wheel_limit,
+)
 from .messages import NANOSECONDS, header, message, planar_pose, quaternion_yaw, stamp_nanoseconds, twist
 from .poses import TF_QOS, TF_TOPIC, TF_TYPE, TfOdometry
 
@@ -68,9 +78,12 @@ class DriveOptions:
         The DDS domain (``ROS_DOMAIN_ID`` when None).
     effort_topic : str or None
         Publish a torque-output law's wheel torques here as ``std_msgs/msg/Float64MultiArray`` (a ros2_control
-        ``JointGroupEffortController``'s ``/<controller>/commands``) instead of /cmd_vel (``ddtrack.ros.effort``).
+        ``JointGroupEffortController``'s ``/<controller>/commands``) instead of /cmd_vel (``ddtrack.ros.joint_groups``).
+    wheel_velocity_topic : str or None
+        Publish a velocity law's (v, omega) as wheel speeds [rad/s] on the believed wheels here, a ros2_control
+        ``JointGroupVelocityController``'s ``/<controller>/commands``, instead of /cmd_vel.
     joints : tuple of str
-        The effort controller's ``joints`` parameter, in its order: which entry is the right wheel, which the left.
+        The joint-group controller's ``joints`` parameter, in its order: which entry is the right wheel, which the left.
     """
 
     odom_topic: str = "/odom"
@@ -86,6 +99,7 @@ class DriveOptions:
     wait: float = 30.0
     domain: int | None = None
     effort_topic: str | None = None
+    wheel_velocity_topic: str | None = None
     joints: tuple[str, ...] = DEFAULT_JOINTS
 
 
@@ -134,14 +148,25 @@ def speed_limits(scenario: Any) -> tuple[float | None, float | None]:
     return (top_v if v is None else float(v)), (top_w if w is None else float(w))
 
 
-def refuse_torque_law(scenario: Any, effort_topic: str | None = None) -> None:
+def refuse_torque_law(scenario: Any, effort_topic: str | None = None, wheel_velocity_topic: str | None = None) -> None:
     """Refuse a law whose output does not fit the topic: wheel torques reach a robot only through a ros2_control
-    effort controller (``--effort-topic``), and a velocity law's (v, omega) are no efforts."""
+    effort controller (``--effort-topic``), a velocity law's (v, omega) are no efforts, and wheel speeds
+    (``--wheel-velocity-topic``) come from a velocity law only."""
     from ..scenario import controller_output
 
     torque = controller_output(scenario.controller) == "torque"
     inner = getattr(scenario.controller, "inner", None)
     how = f" (inner = '{inner}')" if inner else ""
+    if effort_topic is not None and wheel_velocity_topic is not None:
+        raise ConfigError(
+            "--wheel-velocity-topic", "cannot be combined with --effort-topic: a law's command goes to one controller"
+        )
+    if torque and wheel_velocity_topic is not None:
+        raise ConfigError(
+            "--wheel-velocity-topic",
+            f"'{scenario.controller.kind}'{how} outputs wheel torques, not speeds: give --effort-topic for them, or "
+            "drive a velocity-output law (inner = 'none', or a cmd_vel controller)",
+        )
     if torque and effort_topic is None:
         raise ConfigError(
             "controller",
@@ -201,6 +226,7 @@ class Driver:
 
         setup, draws = prepare(scenario)
         loop = closed_loop(scenario, setup)
+        self.nominal = setup.nominal
         self.scenario, self.options, self.log = scenario, options, log
         self.period = float(loop.control_period)
         self.duration = float(scenario.simulation.duration)
@@ -224,11 +250,17 @@ class Driver:
             self.poses = None
             self.odometry = node.subscriber(options.odom_topic, ODOMETRY_TYPE, qos=SENSOR_DATA_QOS)
         msgtype = TWIST_STAMPED_TYPE if options.twist_stamped else TWIST_TYPE
-        self.sides: tuple[int, int] | None = None  #: (right, left) indices of the joints: effort mode
+        #: what goes out: a twist on /cmd_vel, or a joint-group controller's array of wheel torques or speeds
+        self.output: Literal["twist", "effort", "wheel_velocity"] = "twist"
+        self.wheel_limit: float | None = None  #: [rad/s] on either wheel, wheel-velocity mode
         topic = options.cmd_vel_topic
         if options.effort_topic is not None:  # wheel torques, and no /cmd_vel at all
-            self.sides, self.limits = wheel_sides(options.joints), (torque_limit(scenario),) * 2
-            topic, msgtype = options.effort_topic, EFFORT_TYPE
+            self.output, self.limits = "effort", (torque_limit(scenario),) * 2
+            topic, msgtype = options.effort_topic, ARRAY_TYPE
+        elif options.wheel_velocity_topic is not None:  # (v, omega) as wheel speeds, and no /cmd_vel
+            self.output, self.wheel_limit = "wheel_velocity", wheel_speed_limit(scenario, self.nominal)
+            topic, msgtype = options.wheel_velocity_topic, ARRAY_TYPE
+        self.sides = wheel_sides(options.joints)  #: (right, left) indices in the joint-group controller's order
         self.command_topic = topic
         self.commands = None if options.dry_run else node.publisher(topic, msgtype, qos=DEFAULT_QOS)
         self._next_report = 0.0
@@ -242,8 +274,9 @@ class Driver:
         )
 
     def command(self, t: float, y: np.ndarray, nanoseconds: int) -> tuple[float, float]:
-        """The clamped command at reference time ``t`` for the measured ``y``, (v, omega) or in effort mode
-        (tau_r, tau_l) clamped to the torque limit; records the reference and e_tr."""
+        """The clamped command at reference time ``t`` for the measured ``y``, (v, omega) (in wheel-velocity mode
+        also scaled to the wheels' limit) or in effort mode (tau_r, tau_l) clamped to the torque limit; records the
+        reference and e_tr."""
         ref = self._reference(t)
         if self.memory is None:
             self.memory = self._controller.init(y, ref, self._key)
@@ -254,6 +287,8 @@ class Driver:
         v_max, w_max = self.limits
         v = v if v_max is None else min(max(v, -v_max), v_max)
         omega = omega if w_max is None else min(max(omega, -w_max), w_max)
+        if self.output == "wheel_velocity":
+            v, omega = within_wheel_limit(v, omega, self.nominal, self.wheel_limit)
         x_ref, y_ref, theta_ref = float(ref.x), float(ref.y), float(ref.theta)
         error = math.hypot(y[0] - x_ref, y[1] - y_ref)
         self.summary.errors.append(error)
@@ -263,17 +298,21 @@ class Driver:
         )
         self.recorded.append(("/reference", POSE_STAMPED_TYPE, nanoseconds, pose))
         if t >= self._next_report:
-            a, b = (("tau_r", "N m"), ("tau_l", "N m")) if self.sides else (("v", "m/s"), ("omega", "rad/s"))
+            torques = self.output == "effort"
+            a, b = (("tau_r", "N m"), ("tau_l", "N m")) if torques else (("v", "m/s"), ("omega", "rad/s"))
             self.log(f"t = {t:6.2f} s  e_tr = {error:.4f} m  {a[0]} = {v:+.3f} {a[1]}  {b[0]} = {omega:+.3f} {b[1]}")
             self._next_report = t + REPORT_EVERY
         return v, omega
 
     def send(self, v: float, omega: float, nanoseconds: int, *, final: bool = False) -> None:
         """Publish (unless a dry run) and record one command (the final zero twist is not counted); in effort mode
-        ``v, omega`` are (tau_r, tau_l) and go out as the effort controller's Float64MultiArray."""
+        ``v, omega`` are (tau_r, tau_l) and go out as the effort controller's Float64MultiArray, in wheel-velocity
+        mode as the wheel speeds of (v, omega)."""
         body = twist(v, omega)
-        if self.sides is not None:
-            outgoing = effort_message(v, omega, self.sides)
+        if self.output == "effort":
+            outgoing = wheel_array(v, omega, self.sides)
+        elif self.output == "wheel_velocity":
+            outgoing = wheel_array(*wheel_speeds(v, omega, self.nominal), self.sides)
         elif self.options.twist_stamped:
             outgoing = message(TWIST_STAMPED_TYPE, header=header(nanoseconds, self.frames[1]), twist=body)
         else:
@@ -413,7 +452,7 @@ def drive(scenario: Any, options: DriveOptions, bag: Path, *, log: Callable[[str
         Commands sent, tracking errors, missed periods, jitter and how it ended.
     """
     say = log if log is not None else (lambda line: print(line, file=sys.stderr, flush=True))
-    refuse_torque_law(scenario, options.effort_topic)
+    refuse_torque_law(scenario, options.effort_topic, options.wheel_velocity_topic)
     with Stop() as stop, Participant(options.domain) as node:
         if options.path_topic is not None:
             scenario = _await_path(scenario, options, node, stop)
