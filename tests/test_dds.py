@@ -8,6 +8,7 @@ processes do not hear each other.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import json
 import os
@@ -18,7 +19,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from dds_helpers import LOOPBACK
+from dds_helpers import LOOPBACK, ROS2_TYPES
 from rosbags.interfaces import Nodetype
 
 from ddtrack.errors import ConfigError, RunError
@@ -261,77 +262,19 @@ def test_traffic_stays_on_the_loopback(tmp_path, monkeypatch):
     assert "AllowMulticast/#text: false" in trace.read_text()
 
 
-# A user's ROS 2 node, as plain Cyclone DDS: its own types, named and laid out as ROS 2's IDL defines them, on the
-# DDS topics ROS 2 gives /cmd_vel and /odom. It uses nothing of ddtrack. `listen` prints what it received and what
-# it saw of the publishers it matched; `talk` publishes once a subscription is matched and says what it matched.
-PLAIN_NODE = textwrap.dedent(
+# A user's ROS 2 node, as plain Cyclone DDS: its own types (ros2_types.py), named and laid out as ROS 2's IDL
+# defines them, on the DDS topics ROS 2 gives /cmd_vel and /odom. It uses nothing of ddtrack. `listen` prints what
+# it received and what it saw of the publishers it matched; `talk` publishes once a subscription is matched and says
+# what it matched.
+PLAIN_NODE = ROS2_TYPES + textwrap.dedent(
     """
     import dataclasses, json, os, sys, time
-    from dataclasses import dataclass
     from cyclonedds.domain import DomainParticipant
-    from cyclonedds.idl import IdlStruct
-    from cyclonedds.idl.types import array, float64, int32, uint32
     from cyclonedds.pub import DataWriter
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
-
-    @dataclass
-    class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-        sec: int32
-        nanosec: uint32
-
-    @dataclass
-    class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-        stamp: Time
-        frame_id: str
-
-    @dataclass
-    class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-        x: float64
-        y: float64
-        z: float64
-
-    @dataclass
-    class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-        linear: Vector3
-        angular: Vector3
-
-    @dataclass
-    class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
-        x: float64
-        y: float64
-        z: float64
-
-    @dataclass
-    class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-        x: float64
-        y: float64
-        z: float64
-        w: float64
-
-    @dataclass
-    class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-        position: Point
-        orientation: Quaternion
-
-    @dataclass
-    class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
-        pose: Pose
-        covariance: array[float64, 36]
-
-    @dataclass
-    class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
-        twist: Twist
-        covariance: array[float64, 36]
-
-    @dataclass
-    class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
-        header: Header
-        child_frame_id: str
-        pose: PoseWithCovariance
-        twist: TwistWithCovariance
 
     TYPES = {"rt/cmd_vel": Twist, "rt/odom": Odometry}
     QOS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))
@@ -462,6 +405,14 @@ def _exchange(listener: str, talker: str) -> tuple[dict, dict]:
         assert process.returncode == 0, err[-2000:]
     listened, talked = (json.loads(out.splitlines()[-1]) if out.strip() else {} for out, _ in outputs)
     return listened, talked
+
+
+def test_the_plain_node_imports_nothing_of_ddtrack():
+    """It stands for a user's ROS 2 node: its types (ros2_types.py) and its code import Cyclone DDS, not ddtrack."""
+    tree = ast.parse(PLAIN_NODE)
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+    assert {name.split(".")[0] for name in imported} == {"cyclonedds", "dataclasses", "json", "os", "sys", "time"}
 
 
 def test_a_plain_ros_2_node_receives_what_ddtrack_publishes():

@@ -2,7 +2,7 @@
 
 Each end runs in its own process: ``ddtrack drive`` and ``FAKE_ROBOT``, a unicycle written with plain Cyclone DDS
 (its own types, named as ROS 2's middlewares name them, on ``rt/odom`` or ``rt/tf``, and ``rt/cmd_vel``; nothing
-of ddtrack). Every participant talks on the loopback only (``test_dds.LOOPBACK``) and in a domain of its test's own.
+of ddtrack). Every participant talks on the loopback only (``dds_helpers.LOOPBACK``) and in a domain of its test's own.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from test_dds import LOOPBACK, PLAIN_NODE
+from dds_helpers import LOOPBACK, ROS2_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
@@ -29,51 +29,18 @@ TIMEOUT = 30  # [s] a hung process is killed; each test takes well under this
 pytest.importorskip("cyclonedds")
 pytestmark = pytest.mark.slow  # each test starts ddtrack (JAX, a compiled controller): 7 to 15 s
 
-# The ROS 2 types of test_dds's plain node (Time ... Odometry), then a unicycle that integrates the last twist it
+# A user's plain node's ROS 2 types (ros2_types.py), then a unicycle that integrates the last twist it
 # received. lockstep: publish /odom stamped t_k, wait for the next /cmd_vel, advance one period; periodic: publish
 # /odom every period on its own timer, until `silent_after` seconds, and listen to /cmd_vel until `listen_for`.
-_TYPES = PLAIN_NODE.split("TYPES = {")[0]
-FAKE_ROBOT = _TYPES + textwrap.dedent(
+FAKE_ROBOT = ROS2_TYPES + textwrap.dedent(
     """
-    import math
-    from cyclonedds.idl import types
-    from cyclonedds.idl.types import sequence
-
-    @dataclass
-    class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
-        translation: Vector3
-        rotation: Quaternion
-
-    @dataclass
-    class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
-        header: Header
-        child_frame_id: str
-        transform: Transform
-
-    @dataclass
-    class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
-        transforms: sequence[TransformStamped]
-
-    @dataclass
-    class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
-        header: Header
-        twist: Twist
-
-    @dataclass
-    class MultiArrayDimension(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayDimension_"):
-        label: str
-        size: types.uint32
-        stride: types.uint32
-
-    @dataclass
-    class MultiArrayLayout(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayLayout_"):
-        dim: sequence[MultiArrayDimension]
-        data_offset: types.uint32
-
-    @dataclass
-    class Float64MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
-        layout: MultiArrayLayout
-        data: sequence[types.float64]
+    import json, math, os, sys, time
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
 
     config = json.loads(sys.argv[1])
     EFFORT = config.get("effort")  # wheel torques on a Float64MultiArray, in the joint order of EFFORT["joints"]

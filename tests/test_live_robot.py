@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from dds_helpers import loopback_environment
+from dds_helpers import ROS2_TYPES, loopback_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
@@ -28,97 +28,20 @@ PROCESS_TIMEOUT = 120  # [s] only stops a hung process
 # a planner's path (t [s], x, y [m], yaw [rad]): a straight line away from the figure eight's start at (0, 0)
 PATH = [(0.1 * k, 0.2 + 0.01 * k, 0.1 + 0.005 * k, float(np.arctan2(0.005, 0.01))) for k in range(16)]
 
-# A user's ROS 2 node as plain Cyclone DDS: ROS 2's IDL types and topic names, nothing of ddtrack. It answers each
-# /clock with one /cmd_vel (constant, or varying with the count of clocks), and prints the clocks and odometry it got.
+# A user's ROS 2 node as plain Cyclone DDS: ROS 2's IDL types (ros2_types.py) and topic names, nothing of ddtrack.
+# It answers each /clock with one /cmd_vel (constant, or varying with the count of clocks), and prints the clocks and
+# odometry it got.
 # Patterns "path" and "nanpath" first publish a nav_msgs/Path on /plan, latched (reliable, transient local), as a
 # planner does: PATH's poses, or the same with a NaN; "nanpath" then waits for the robot to refuse it and leave.
-DRIVER = textwrap.dedent(
+DRIVER = ROS2_TYPES + textwrap.dedent(
     """
-    import dataclasses, json, math, os, sys, time
-    from dataclasses import dataclass
+    import json, math, os, sys, time
     from cyclonedds.domain import DomainParticipant
-    from cyclonedds.idl import IdlStruct
-    from cyclonedds.idl.types import array, float64, int32, sequence, uint32
     from cyclonedds.pub import DataWriter
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
-
-    @dataclass
-    class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-        sec: int32
-        nanosec: uint32
-
-    @dataclass
-    class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
-        clock: Time
-
-    @dataclass
-    class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-        stamp: Time
-        frame_id: str
-
-    @dataclass
-    class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-        x: float64
-        y: float64
-        z: float64
-
-    @dataclass
-    class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-        linear: Vector3
-        angular: Vector3
-
-    @dataclass
-    class TwistStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TwistStamped_"):
-        header: Header
-        twist: Twist
-
-    @dataclass
-    class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-        x: float64
-        y: float64
-        z: float64
-        w: float64
-
-    @dataclass
-    class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
-        x: float64
-        y: float64
-        z: float64
-
-    @dataclass
-    class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-        position: Point
-        orientation: Quaternion
-
-    @dataclass
-    class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
-        header: Header
-        pose: Pose
-
-    @dataclass
-    class Path(IdlStruct, typename="nav_msgs::msg::dds_::Path_"):
-        header: Header
-        poses: sequence[PoseStamped]
-
-    @dataclass
-    class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
-        pose: Pose
-        covariance: array[float64, 36]
-
-    @dataclass
-    class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
-        twist: Twist
-        covariance: array[float64, 36]
-
-    @dataclass
-    class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
-        header: Header
-        child_frame_id: str
-        pose: PoseWithCovariance
-        twist: TwistWithCovariance
 
     pattern, v, omega = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepLast(10))

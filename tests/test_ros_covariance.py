@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ddtrack.ros.covariance import odometry_covariances
+from ddtrack.ros.covariance import CovariancePropagation, odometry_covariances
 
 RADIUS, HALF_AXLE, PERIOD, COUNTS = 0.033, 0.08, 0.05, 4096
 STEPS, RUNS = 400, 4000
@@ -57,9 +57,10 @@ def predicted(truth: np.ndarray, **fix) -> np.ndarray:
     step = np.diff(mean, axis=0, prepend=mean[:1])  # each row: the period that ends there
     v, omega = np.hypot(step[:, 0], step[:, 1]) / PERIOD, step[:, 2] / PERIOD
     columns = {"odom_theta": mean[:, 2], "odom_v": v, "odom_omega": omega}
-    pose, _ = odometry_covariances(
-        columns, wheel_radius=RADIUS, half_axle=HALF_AXLE, period=PERIOD, encoder_counts=COUNTS, **fix
+    propagation = CovariancePropagation(
+        wheel_radius=RADIUS, half_axle=HALF_AXLE, period=PERIOD, encoder_counts=COUNTS, **fix
     )
+    pose, _ = odometry_covariances(columns, propagation)
     return pose.reshape(-1, 6, 6)[:, [0, 1, 5]][:, :, [0, 1, 5]]
 
 

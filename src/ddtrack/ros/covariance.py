@@ -19,52 +19,34 @@ wheels that slip, a gyro's bias. The true pose's ``/odom`` is exact, so its cova
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..scenario import Scenario
 
 #: a planar covariance's (x, y, yaw) and (v_x, v_y, omega) as indices into ROS's 6 x 6 row-major matrix
 PLANAR = np.array([0, 1, 5])
 
 
 def odometry_covariances(
-    columns: Mapping[str, np.ndarray],
-    *,
-    wheel_radius: float,
-    half_axle: float,
-    period: float,
-    encoder_counts: int,
-    fix_periods: int = 0,
-    fix_gain: float = 0.0,
-    fix_position_std: float = 0.0,
-    fix_heading_std: float = 0.0,
-    gyro_noise_density: float | None = None,
+    columns: Mapping[str, np.ndarray], propagation: CovariancePropagation
 ) -> tuple[np.ndarray, np.ndarray]:
     """(pose, twist) covariances, each (N, 36) row-major, of the odometry estimate in ``columns`` (``odom_theta``,
-    ``odom_v``, ``odom_omega`` per control period), with the nominal ``wheel_radius`` R and ``half_axle`` L [m],
-    control ``period`` T_c [s], ``encoder_counts`` n per revolution (0: exact angles) and an absolute fix every
-    ``fix_periods`` periods (0: none) blended with ``fix_gain`` and noise of these standard deviations [m], [rad];
-    ``gyro_noise_density`` [rad/s/sqrt(Hz)]: the turns come from a gyro of that white noise (None: the encoders').
-    """
+    ``odom_v``, ``odom_omega`` per control period), carried by ``propagation`` from its period 0 (a fresh one)."""
     theta, v, omega = (np.asarray(columns[f"odom_{name}"], dtype=float) for name in ("theta", "v", "omega"))
-    propagation = CovariancePropagation(
-        wheel_radius=wheel_radius,
-        half_axle=half_axle,
-        period=period,
-        encoder_counts=encoder_counts,
-        fix_periods=fix_periods,
-        fix_gain=fix_gain,
-        fix_position_std=fix_position_std,
-        fix_heading_std=fix_heading_std,
-        gyro_noise_density=gyro_noise_density,
-    )
     pose = np.stack([propagation.step(*row) for row in zip(theta, v, omega, strict=True)]) if len(theta) else None
     pose = np.zeros((0, 3, 3)) if pose is None else pose
     return _ros_six(pose), _ros_six(np.broadcast_to(propagation.twist, pose.shape))
 
 
 class CovariancePropagation:
-    """The odometry estimate's covariance period by period (:func:`odometry_covariances`' arguments), so a live
-    robot (``ddtrack robot``) computes each period's in constant time.
+    """The odometry estimate's covariance period by period, so a live robot (``ddtrack robot``) computes each
+    period's in constant time: with the nominal ``wheel_radius`` R and ``half_axle`` L [m], control ``period`` T_c
+    [s], ``encoder_counts`` n per revolution (0: exact angles) and an absolute fix every ``fix_periods`` periods
+    (0: none) blended with ``fix_gain`` and noise of these standard deviations [m], [rad]; ``gyro_noise_density``
+    [rad/s/sqrt(Hz)]: the turns come from a gyro of that white noise (None: the encoders').
 
     Attributes
     ----------
@@ -100,6 +82,26 @@ class CovariancePropagation:
         speed = 4.0 * self.reading * (wheel_radius / 2.0 / period) ** 2  # two increments, each of two readings' errors
         self.twist = np.diag([speed, 0.0, self.density**2 / period if self.gyro else speed / half_axle**2])
         self.k, self.theta = 0, 0.0
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> CovariancePropagation | None:
+        """The propagation of ``scenario``'s ``[sensing]``, with the controller's nominal R-hat, L-hat; None without
+        ``[sensing] odometry`` (the pose reported is the true one, exact)."""
+        sensing, period = scenario.sensing, float(scenario.simulation.control_period)
+        if not sensing.odometry:
+            return None
+        gyro = sensing.gyro(scenario.robot.preset_robot())  # (noise density, bias) where the heading is a gyro's
+        return cls(
+            wheel_radius=scenario.robot.wheel_radius,
+            half_axle=scenario.robot.half_axle,
+            period=period,
+            encoder_counts=sensing.encoder_counts,
+            fix_periods=round(sensing.fix_period / period),
+            fix_gain=sensing.fix_gain,
+            fix_position_std=sensing.fix_position_std,
+            fix_heading_std=sensing.fix_heading_std,
+            gyro_noise_density=None if gyro is None else gyro[0],
+        )
 
     def step(self, theta: float, v: float, omega: float) -> np.ndarray:
         """The (3, 3) covariance of (x, y, yaw) at the next period, whose estimate is (``theta``, ``v``, ``omega``)."""

@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import ConfigError, RunError
 from ..model.traction import wheel_speeds
 from ..outdir import MARKER_TIME_FORMAT, atomic_write, read_marker
-from .covariance import odometry_covariances
+from .covariance import CovariancePropagation, odometry_covariances
 from .messages import (
     BODY_FRAME,
     NANOSECONDS,
@@ -176,23 +176,9 @@ def viewer_of(scenario: Any, columns: Mapping[str, np.ndarray], frames: Frames) 
         caster = robot.caster_position
     name = re.sub(r"\W+", "_", robot.name).strip("_").lower() if robot is not None else "ddtrack_robot"
     geometry = {"wheel_radius": plant.wheel_radius, "half_axle": plant.half_axle}
-    covariances: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-    sensing = scenario.sensing
-    if sensing.odometry and all(f"odom_{name}" in columns for name in ("theta", "v", "omega")):
-        period = scenario.simulation.control_period
-        gyro = sensing.gyro(robot)  # (noise density, bias) where the heading comes from a gyro
-        covariances = odometry_covariances(
-            columns,
-            wheel_radius=scenario.robot.wheel_radius,
-            half_axle=scenario.robot.half_axle,
-            period=period,
-            encoder_counts=sensing.encoder_counts,
-            fix_periods=round(sensing.fix_period / period),
-            fix_gain=sensing.fix_gain,
-            fix_position_std=sensing.fix_position_std,
-            fix_heading_std=sensing.fix_heading_std,
-            gyro_noise_density=None if gyro is None else gyro[0],
-        )
+    estimated = all(f"odom_{name}" in columns for name in ("theta", "v", "omega"))
+    propagation = CovariancePropagation.of(scenario) if estimated else None
+    covariances = (None, None) if propagation is None else odometry_covariances(columns, propagation)
     return Viewer(
         frames,
         robot_urdf(name, frames.base, caster=caster, **geometry),

@@ -146,7 +146,7 @@ class Robot:
         self._odometry = jax.jit(lambda loop, x, xi: loop.noise.measure(measured(loop.plant, x), xi))
         robot = scenario.plant_params()
         self.geometry = {"half_axle": robot.half_axle, "wheel_radius": robot.wheel_radius}
-        self.covariance = self._covariance()
+        self.covariance = CovariancePropagation.of(scenario)
         self._angles = np.zeros(2)
         self._last: dict[str, float] | None = None
         # compiled now, not in period 0: a realtime robot would start seconds late
@@ -156,24 +156,6 @@ class Robot:
     def _draw(self, k: int) -> tuple[Any, Any]:
         """Period k's standard-normal disturbance and noise draws."""
         return self.draws.disturbance[k], self.draws.noise[k]
-
-    def _covariance(self) -> CovariancePropagation | None:
-        """The odometry estimate's covariance propagation, as ``ddtrack export`` computes it (None: true pose)."""
-        sensing = self.scenario.sensing
-        if not sensing.odometry:
-            return None
-        gyro = sensing.gyro(self.scenario.robot.preset_robot())
-        return CovariancePropagation(
-            wheel_radius=self.scenario.robot.wheel_radius,
-            half_axle=self.scenario.robot.half_axle,
-            period=self.period,
-            encoder_counts=sensing.encoder_counts,
-            fix_periods=round(sensing.fix_period / self.period),
-            fix_gain=sensing.fix_gain,
-            fix_position_std=sensing.fix_position_std,
-            fix_heading_std=sensing.fix_heading_std,
-            gyro_noise_density=None if gyro is None else gyro[0],
-        )
 
     def sensed(self) -> np.ndarray:
         """x_k's BODY vector as the odometry reports it (the true one without ``[sensing] odometry``)."""
