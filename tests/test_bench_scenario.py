@@ -277,6 +277,10 @@ def test_a_recorded_reference_pairs_the_others_on_its_one_seed(recorded):
     assert board["default"]["improvement"]["n"] == 1 and board["default"]["improvement"]["missing"] == 1
     text = board_markdown(list(board.values()), "by_hand")
     assert "(by_hand is a recorded run: the others pair on its one seed, 1)" in text
+    assert "nothing pairs with it" not in text
+    seed_0 = {k: r for k, r in read_records(out).items() if r["seed"] == 0}  # a bench of --seeds 1
+    unpaired = board_markdown(leaderboard(seed_0, entries), "by_hand")
+    assert "No other entry ran seed 1, so nothing pairs with it: give --seeds 2 or more." in unpaired
 
 
 def test_a_failed_and_a_realtime_run_rank_without_simulating(tmp_path, cli):

@@ -225,10 +225,10 @@ def bench_entries(
     """Every entry of ``bench --scenario``, checked before anything runs (a :class:`ConfigError` naming the option
     otherwise): the files' and run folders' entries (``overrides`` applied to each file), then the ``controllers``
     added on the first entry's experiment."""
-    files = _given_entries(paths, overrides)
+    given = _given_entries(paths, overrides)
     if not controllers:
-        return files
-    return files + _controller_entries(files[0], controllers, [e.label for e in files])
+        return given
+    return given + _controller_entries(given[0], controllers, [e.label for e in given])
 
 
 def plan_entries(entries: Sequence[BenchEntry], seeds: int) -> Plan:
@@ -372,15 +372,19 @@ def _paired_on(board: Sequence[dict], reference: str) -> str:
 
 
 def _recorded_notes(board: Sequence[dict]) -> list[str]:
-    """A line per recorded entry: where its one run comes from, and whether it reproduces."""
+    """A line per recorded entry: where its one run comes from, whether another entry ran its seed, and whether
+    it reproduces."""
     notes = []
     for e in board:
         if not (recorded := e.get("recorded")):
             continue
+        seed = recorded["seed"]
         note = (
-            f"{e['entry']}: recorded in {recorded['run']} (driven by {e['controller']}), one run at seed "
-            f"{recorded['seed']}, scored against the true pose and not simulated again: no interval."
+            f"{e['entry']}: recorded in {recorded['run']} (driven by {e['controller']}), one run at seed {seed}, "
+            "scored against the true pose and not simulated again: no interval."
         )
+        if len(board) > 1 and not any(str(seed) in o["status_by_seed"] for o in board if o is not e):
+            note += f" No other entry ran seed {seed}, so nothing pairs with it: give --seeds {seed + 1} or more."
         if not recorded["reproducible"]:  # realtime: the wall clock decided which command each period held
             note += " A realtime run: the wall clock timed its commands, so no rerun gives it to the bit."
         notes += ["", note]
