@@ -297,6 +297,7 @@ def test_a_failed_and_a_realtime_run_rank_without_simulating(tmp_path, cli):
     assert (
         "A realtime run: the wall clock timed its commands" in stdout and "0 runs (0 reused) and 2 recorded" in stdout
     )
+    assert ".json, entries.png" in stdout and not (tmp_path / "out" / "results.parquet").exists()  # nothing ran
 
 
 @pytest.mark.slow

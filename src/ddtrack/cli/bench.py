@@ -216,6 +216,6 @@ def _bench_scenarios(
     click.echo(
         f"{summary['runs']} runs ({summary['reused']} reused){recorded} in {time.perf_counter() - start:.0f} s, "
         f"{summary['not_ok']} diverged or non-finite, {summary['errors']} errors; "
-        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, {FIGURE}"
+        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, {'results.*, ' if summary['runs'] else ''}{FIGURE}"
     )
     return 1 if summary["errors"] else 0
