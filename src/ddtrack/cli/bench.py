@@ -34,10 +34,12 @@ def _names(controllers: str | None) -> list[str] | None:
     "--scenario",
     "scenarios",
     multiple=True,
-    metavar="FILE.toml",
+    metavar="FILE.toml|RUN",
     type=click.Path(path_type=Path),
     help="Your own robot (repeatable; not with --suite): each file is an entry labelled by its stem, and the files "
-    "may differ only in [controller]. Improvements are over the first file's entry, paired by seed.",
+    "may differ only in [controller]. A run folder (ddtrack run's, or ddtrack robot's: a foreign controller's) is "
+    "an entry labelled by its name: its one run, at its simulation.seed, ranked as recorded, not run again. "
+    "Improvements are over the first entry's, paired by seed.",
 )
 @click.option(
     "--seeds",
@@ -90,11 +92,12 @@ def bench(
     --suite quick|standard: every controller over trajectories, uncertainty levels and seeds, with a
       robustness map over mass and friction;
     --suite robots: on four robot presets, each on the plant it really has, under six conditions;
-    --scenario FILE.toml ...: on your own robot. Each file is an entry; every section but [controller]
-      must resolve the same in every file (the first differing key is named otherwise). --controllers adds
+    --scenario FILE.toml ...: on your own robot. Each file is an entry, and each run folder (ddtrack run's,
+      ddtrack robot's) an entry of its one recorded run; every section but [controller] must resolve the same
+      in every entry (the first differing key is named otherwise). --controllers adds
       registered controllers on the first file's robot. Writes leaderboard.md/.csv/.parquet/.json (mean e_tr,
       RMS, max, effort, saturation with intervals; runs ok and diverged; grip and motor flags; the improvement
-      over the first file's entry, paired by seed), results.* and entries.png.
+      over the first entry, paired by seed), results.* and entries.png.
 
     \b
     Example: ddtrack bench --scenario default.toml --scenario tuned.toml --seeds 5 --out runs/mine
@@ -209,9 +212,10 @@ def _bench_scenarios(
         start_resumable(out, command="bench", study=study, resume=resume)
         summary = run_scenario_bench(entries, seeds, out, client, **study_progress(advance))
     click.echo(board_markdown(summary["leaderboard"], summary["reference"]), nl=False)
+    recorded = f" and {len(summary['recorded'])} recorded" if summary["recorded"] else ""
     click.echo(
-        f"{summary['runs']} runs ({summary['reused']} reused) in {time.perf_counter() - start:.0f} s, "
+        f"{summary['runs']} runs ({summary['reused']} reused){recorded} in {time.perf_counter() - start:.0f} s, "
         f"{summary['not_ok']} diverged or non-finite, {summary['errors']} errors; "
-        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, results.*, {FIGURE}"
+        f"wrote {out}/leaderboard.md, .csv, .parquet, .json, {'results.*, ' if summary['runs'] else ''}{FIGURE}"
     )
     return 1 if summary["errors"] else 0
