@@ -187,6 +187,7 @@ def test_an_added_controller_takes_the_presets_clamps(tmp_path):
         ("no metrics", "--scenario", "no metrics.json: not a whole run folder"),
         ("measured", "--scenario", "a ddtrack drive run: its e_tr is what the robot's odometry believed"),
         ("folder differs", "--scenario", "nav2 differs from default.toml in plant.mass (13.0 vs 12.0)"),
+        ("cut short", "--scenario", "the run was cut short (Ctrl-C or SIGTERM, after 40 periods)"),
         ("collision", "--controllers", "'backstepping' is also the label of a --scenario file"),
         ("unknown", "--controllers", "unknown controller 'ltv_lq'"),
         ("plant", "--controllers", "kinematic_backstepping outputs velocity commands, but the plant"),
@@ -207,6 +208,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, case,
         "no metrics": lambda: ["--scenario", _without(run_folder(tmp_path, "nav2"), "metrics.json")],
         "measured": lambda: ["--scenario", run_folder(tmp_path, "nav2", METRICS | {"warnings": [MEASURED]})],
         "folder differs": lambda: ["--scenario", run_folder(tmp_path, "nav2", mass=13.0)],
+        "cut short": lambda: ["--scenario", run_folder(tmp_path, "nav2", METRICS | {"driven_by": STOPPED})],
         "collision": lambda: ["--scenario", write(tmp_path, "backstepping"), "--controllers", "backstepping"],
         "unknown": lambda: ["--controllers", "ltv_lq"],
         "plant": lambda: ["--controllers", "kinematic_backstepping"],
@@ -222,6 +224,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, case,
 
 
 MEASURED = {"code": "measured_pose", "message": "the pose is the robot's odometry"}  # ddtrack drive's warning
+STOPPED = {"command": "ddtrack robot", "mode": "realtime", "topic": "/cmd_vel", "ended": "stopped", "periods": 40}
 
 
 def _without(folder, name):
@@ -311,7 +314,13 @@ def test_a_foreign_controller_s_robot_run_ranks_beside_a_scenario(tmp_path):
     assert code == 0, stdout
     board = {e["entry"]: e for e in json.loads((tmp_path / "b" / "leaderboard.json").read_text())["leaderboard"]}
     metrics = json.loads((robot / "metrics.json").read_text())
-    assert metrics["driven_by"] == {"command": "ddtrack robot", "mode": "lockstep", "topic": "/cmd_vel"}
+    assert metrics["driven_by"] == {
+        "command": "ddtrack robot",
+        "mode": "lockstep",
+        "topic": "/cmd_vel",
+        "ended": "done",
+        "periods": 30,  # 1.5 s at 20 Hz, to the end
+    }
     assert board["nav2"]["controller"] == "ddtrack robot/lockstep" and board["nav2"]["recorded"]["reproducible"]
     assert board["nav2"]["e_tr_mean"]["mean"] == metrics["e_tr_mean"] and board["nav2"]["runs"] == 1
     assert board["figure8"]["improvement"]["n"] == 1  # paired on the robot's seed, 0

@@ -55,9 +55,10 @@ def _start_nanoseconds(text: str | None) -> int | None:
     return int(seconds * 1_000_000_000)
 
 
-def driven_by(mode: str) -> dict[str, str]:
-    """``metrics.json``'s ``driven_by`` of a robot run: what drove it, which ``bench --scenario`` names."""
-    return {"command": "ddtrack robot", "mode": mode, "topic": "/cmd_vel"}
+def driven_by(mode: str, ended: str, periods: int) -> dict[str, str | int]:
+    """``metrics.json``'s ``driven_by`` of a robot run: what drove it and how the run ended (``done``, ``stopped``,
+    ``silent``, ``failed``) after how many periods, which ``bench --scenario`` names and checks."""
+    return {"command": "ddtrack robot", "mode": mode, "topic": "/cmd_vel", "ended": ended, "periods": periods}
 
 
 @cli.command(short_help="Run SCENARIO's plant as a ROS 2 robot driven by /cmd_vel, and score it.")
@@ -128,7 +129,7 @@ def robot(
     from ..rundir import write_run
 
     with staged_folder(folder, command="run") as stage:  # a run folder as `ddtrack run` writes it
-        write_run(stage, spec, live.columns, live.metrics | {"driven_by": driven_by(mode)})
+        write_run(stage, spec, live.columns, live.metrics | {"driven_by": driven_by(mode, live.ended, live.periods)})
     metrics = live.metrics
     simulated = live.periods * spec.simulation.control_period
     mean, worst = (metrics.get(name) for name in ("e_tr_mean", "e_tr_max"))

@@ -24,6 +24,8 @@ from ..scenario import Scenario, load_scenario
 MEASURED = "measured_pose"
 RUN_FILES = ("scenario.toml", "metrics.json")  #: what a run folder holds, besides its marker
 _WRITERS = "give a folder written by `ddtrack run` or `ddtrack robot`"
+#: how a ``ddtrack robot`` run ends before the scenario's end, and what it means
+CUT_SHORT = {"stopped": "Ctrl-C or SIGTERM", "silent": "its driver stopped answering"}
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,15 @@ def read_recorded(folder: Path) -> tuple[Scenario, RecordedRun]:
             "a simulation scores",
             "rank a `ddtrack robot` run instead: its plant knows the true pose",
         )
+    cut = (metrics.get("driven_by") or {}).get("ended") if isinstance(metrics.get("driven_by"), Mapping) else None
+    if cut in CUT_SHORT:  # its metrics cover part of the reference, which no whole run would be compared with
+        periods = metrics["driven_by"].get("periods")
+        raise _refused(
+            folder,
+            f"the run was cut short ({CUT_SHORT[cut]}, after {periods} periods): its metrics cover only part of the "
+            "reference",
+            "rank a run that went to the scenario's end",
+        )
     try:
         scenario = load_scenario(folder / "scenario.toml")
     except ConfigError as exc:
@@ -111,4 +122,4 @@ def read_recorded(folder: Path) -> tuple[Scenario, RecordedRun]:
     return scenario, RecordedRun(folder, scenario.simulation.seed, metrics, driver, reproducible)
 
 
-__all__ = ["MEASURED", "RUN_FILES", "RecordedRun", "driven_by", "read_recorded"]
+__all__ = ["CUT_SHORT", "MEASURED", "RUN_FILES", "RecordedRun", "driven_by", "read_recorded"]
