@@ -151,6 +151,12 @@ def test_a_plain_ros_2_node_drives_the_robot_in_lockstep(tmp_path):
     table = pq.read_table(folder / "timeseries.parquet")
     assert table.num_rows == periods and table.column("v_cmd").to_pylist()[-1] == pytest.approx(0.15)
     assert (folder / "ddtrack.json").is_file() and "lockstep, 30 periods" in summary
+    # the report names what drove the plant, not the scenario's own controller, which did not run
+    from ddtrack.report.render import render
+
+    page = render(folder)
+    assert "whatever published /cmd_vel (ddtrack robot, lockstep mode); the run ended done after 30 periods" in page
+    assert "ddtrack robot/lockstep on figure_eight" in page and "kinematic_backstepping on" not in page
 
 
 def test_a_path_on_a_topic_is_the_reference(tmp_path):

@@ -22,6 +22,7 @@ import tomli_w
 from .outdir import atomic_write
 from .plotting import plot_errors, plot_gains, plot_path, plot_states, plot_torques
 from .scenario import Scenario, to_toml_dict
+from .studies.recorded import driven_by
 
 
 def float64_array(values: npt.ArrayLike) -> pa.Array:
@@ -59,7 +60,8 @@ def write_run(
             lambda f: f.write((json.dumps(identification, indent=2, allow_nan=False) + "\n").encode()),
         )
     window = tuple(metrics["window"])
-    title = f"{scenario.name}: {scenario.controller.kind} on {scenario.trajectory.kind}"
+    driver, _ = driven_by(metrics, scenario.controller.kind)  # a live robot's driver, not the scenario's controller
+    title = f"{scenario.name}: {driver} on {scenario.trajectory.kind}"
     figures = {
         "path.png": plot_path(columns, title=title),
         "states.png": plot_states(columns, title=title),

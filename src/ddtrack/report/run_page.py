@@ -11,6 +11,7 @@ import numpy as np
 
 from ..plotting import ROBOT, plot_errors, plot_gains, plot_path, plot_states, plot_torques, plt
 from ..sim import remedy
+from ..studies.recorded import driven_by
 from ._page import (
     GAIN_NAMES,
     KINDS,
@@ -84,6 +85,14 @@ def _written(folder: Path, names: Sequence[str]) -> str:
     return _utc(max(times)) if times else "unknown"
 
 
+def _driver_text(driver: Mapping[str, Any]) -> str:
+    """``driven_by`` in words: whatever published the topic drove the plant of ``ddtrack robot``, and how it ended."""
+    text = f"whatever published {driver.get('topic', '/cmd_vel')} ({driver.get('command')}, {driver.get('mode')} mode)"
+    if "ended" in driver:
+        text += f"; the run ended {driver['ended']} after {fmt(driver.get('periods'))} periods"
+    return text
+
+
 def _utc(timestamp: float) -> str:
     return dt.datetime.fromtimestamp(timestamp, dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
 
@@ -108,8 +117,11 @@ def _run_page(folder: Path) -> dict:
     for key, label, unit, scale in METRICS:
         if key in metrics:  # failure_time only where the run failed
             rows.append((label, fmt(metrics[key], scale=scale), unit))
-    known = {"status", "window", "final_gains", *(m[0] for m in METRICS)}
+    known = {"status", "window", "final_gains", "driven_by", *(m[0] for m in METRICS)}
     rows += [(key, fmt(value), "") for key, value in metrics.items() if key not in known]
+    if isinstance(driver := metrics.get("driven_by"), Mapping):  # a live robot's run: what drove it, in words
+        rows.append(("driven by", _driver_text(driver), ""))
+    kind, _ = driven_by(metrics, kind)
     notes = []
     if status != "ok":
         when = f" at t = {fmt(metrics['failure_time'])} s" if "failure_time" in metrics else ""

@@ -59,12 +59,13 @@ def _refused(folder: Path, why: str, hint: str = _WRITERS) -> ConfigError:
     return ConfigError("--scenario", f"{folder}: {why}", hint)
 
 
-def driven_by(metrics: Mapping[str, Any], scenario: Scenario) -> tuple[str, bool]:
+def driven_by(metrics: Mapping[str, Any], controller_kind: str) -> tuple[str, bool]:
     """(what drove the run, whether it reproduces to the bit): ``driven_by``'s command and mode where the metrics
-    have it, else the scenario's controller kind (a simulation, which reproduces)."""
+    have it (``ddtrack robot/lockstep``), else the scenario's ``controller_kind`` (a simulation, which reproduces);
+    the label the bench's controller column, the run's figures and its report page give."""
     driver = metrics.get("driven_by")
     if not isinstance(driver, Mapping):
-        return scenario.controller.kind, True
+        return controller_kind, True
     mode = driver.get("mode")
     return f"{driver.get('command', 'unknown')}/{mode}", mode != "realtime"
 
@@ -118,7 +119,7 @@ def read_recorded(folder: Path) -> tuple[Scenario, RecordedRun]:
     except ConfigError as exc:
         where = f"{exc.field}: " if exc.field else ""
         raise _refused(folder, f"scenario.toml: {where}{exc.message}", exc.suggestion) from None
-    driver, reproducible = driven_by(metrics, scenario)
+    driver, reproducible = driven_by(metrics, scenario.controller.kind)
     return scenario, RecordedRun(folder, scenario.simulation.seed, metrics, driver, reproducible)
 
 
