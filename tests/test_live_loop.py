@@ -1,6 +1,7 @@
 """``ddtrack drive`` against ``ddtrack robot`` (docs/ros.md): a ddtrack controller drives a ddtrack plant over DDS,
-each in its own process, on the loopback only, in lockstep; the run scores as the same scenario run offline, drive's
-bag is a log ``identify`` fits, and the robot's run folder one ``export`` reads."""
+each in its own process, on the loopback only. In lockstep the run scores as the same scenario run offline, drive's
+bag is a log ``identify`` fits, and the robot's run folder one ``export`` reads; on the wall clock it scores as the
+scenario run offline with the latency measured from what the two recorded, within the band that latency explains."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from dds_helpers import loopback_environment
 
@@ -18,6 +21,8 @@ FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
 DURATION = 10.0  # [s] 200 periods at the scenario's 20 Hz: a quarter of the lap, both lobes' first turn
 TIMING = ["--set", f"simulation.duration={DURATION}", "--set", f"simulation.metric_window=[0, {DURATION}]"]
 TIMEOUT = 180  # [s] only stops a hung process
+PERIOD = 0.05  # [s] the scenario's control period
+DELAY = 0.05  # [s] its sensing.actuation_delay: the robot's plant applies it too, after /cmd_vel
 
 pytestmark = pytest.mark.slow
 
@@ -83,3 +88,123 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
     driven = json.loads((tmp_path / "drive" / "metrics.json").read_text())
     assert driven["warnings"][0]["code"] == "measured_pose" and driven["e_tr_mean"] > 0
     assert "wrote" in ddtrack("export", str(tmp_path / "drive"), "--to", str(tmp_path / "drive.csv"))
+
+
+def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_measured_latency(tmp_path):
+    """On the wall clock, each side keeping its own period, a command reaches the plant later than in the simulator
+    (where the command from x_k acts over period k): the robot holds the latest /cmd_vel received when its period
+    starts. This measures that latency from what the two processes recorded, runs the scenario offline with it
+    added to the actuation delay, and compares the mean tracking errors.
+
+    The issue asked for 10 %; that model cannot give it, and the band is -30 % to +10 %. Both clocks tick in phase
+    (drive's t = 0 is x_0's arrival, 2 to 5 ms after its stamp), so whether drive's tick k sees x_k or still x_(k-1)
+    is a race, decided tick by tick: of the measured latency from x_j to the plant (a mean of 0.70 to 1.33 periods
+    over 14 runs, 4 of them beside a busy loop), 0.26 to 0.83 period is the odometry's age at drive's tick and the
+    rest the command's way to the robot's next period. An old measurement against the current reference puts the
+    robot ahead of the reference (offline, a measurement delay of one period: 4 mm ahead mid-run), a late command
+    behind it; mixed at random they cancel, which no single actuation delay reproduces. So the live run tracks
+    better than the offline run charged with the whole latency: 4 % to 24 % below it in those 14 runs (live 3.4 to
+    4.4 mm, offline 4.3 to 4.7 mm), never above. The band fails a drive whose reference runs a period or more
+    behind the robot's clock (94 ms behind: +71 % measured) or a latency the model does not know."""
+    env = loopback_environment(20 + (os.getpid() * 7 + 5) % 200)
+    live, offline, driven = tmp_path / "live", tmp_path / "offline", tmp_path / "drive"
+    ddtrack = [sys.executable, "-m", "ddtrack"]
+    pipes = {"env": env, "stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}
+    # drive first: it compiles, then starts its period timer at the first odometry, which must be the robot's x_0;
+    # the robot waits for no one in realtime, so a drive still compiling would start at a later period, its reference
+    # behind the robot's, which scores against its own t_k = k T (94 ms behind: 7.6 mm measured, 4.4 offline)
+    drive = subprocess.Popen([*ddtrack, "drive", str(FIGURE8), *TIMING, "--out", str(driven)], **pipes)
+    try:
+        waiting = ""
+        while "waiting for" not in waiting and drive.poll() is None:
+            waiting = drive.stderr.readline()
+        robot = subprocess.Popen(
+            [*ddtrack, "robot", str(FIGURE8), "--mode", "realtime", *TIMING, "--out", str(live)], **pipes
+        )
+        try:
+            outputs = [process.communicate(timeout=TIMEOUT) for process in (robot, drive)]
+        finally:
+            robot.kill()
+    finally:
+        drive.kill()
+    for process, (_, err) in zip((robot, drive), outputs, strict=True):
+        assert process.returncode == 0, err[-3000:]
+    late, to_answer, to_send = _latencies(driven, live, PERIOD)
+    # drive's t = 0 is the robot's t_0 but for one publication and its delivery: well within a period
+    assert 0.0 < late < PERIOD / 2, late
+    # typically one period (drive's tick k answers x_k, the robot holds it from period k + 1); two when drive's tick
+    # came before x_k arrived (both clocks tick in phase, within milliseconds) or the command after the robot's
+    # period started; none when drive answered between the robot's publication and its take; more is a broken clock
+    assert np.all((to_answer >= 0) & (to_answer <= 3)), _counts(to_answer)
+    latency = float(np.mean(to_answer)) * PERIOD
+    delay = round(DELAY + latency, 4)  # any delay is allowed: a fraction of a period splits it between two commands
+    subprocess.run(
+        [*ddtrack, "run", str(FIGURE8), *TIMING, "--set", f"sensing.actuation_delay={delay}", "--out", str(offline)],
+        check=True,
+        capture_output=True,
+        timeout=TIMEOUT,
+    )
+    measured = {
+        name: json.loads((folder / "metrics.json").read_text())
+        for name, folder in [("live", live), ("offline", offline)]
+    }
+    assert measured["live"]["status"] == measured["offline"]["status"] == "ok"
+    live_error, offline_error = measured["live"]["e_tr_mean"], measured["offline"]["e_tr_mean"]
+    figures = (
+        f"t = 0 {1e3 * late:.1f} ms after x_0; periods from x_j to the plant {_counts(to_answer)}, from drive's "
+        f"tick {_counts(to_send)}; latency {latency:.4f} s; e_tr mean live {live_error:.5g}, "
+        f"offline {offline_error:.5g}"
+    )
+    print(figures)
+    assert -0.30 * offline_error <= live_error - offline_error <= 0.10 * offline_error, figures
+
+
+def _counts(periods: np.ndarray) -> dict[int, int]:
+    """How many times each number of periods occurs (drive's tick can come after the robot's period: -1)."""
+    return {int(value): int(count) for value, count in zip(*np.unique(periods, return_counts=True), strict=True)}
+
+
+def _wrapped(angle: np.ndarray) -> np.ndarray:
+    """Angles [rad] in [-pi, pi): drive's run folder unwraps its headings, the bag's quaternions do not."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _latencies(drive: Path, live: Path, period: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """What the two processes recorded, on one machine's wall clock: (how long after the stamp of x_0 drive's t = 0
+    came [s]; for each robot period k from the first command on, k - j, with x_j the odometry its command answered;
+    and k - i, with i drive's tick that sent it).
+
+    Drive's bag has the odometry it received with the robot's stamps (t_0 + j T: the wall clock in realtime) and
+    each command at its nominal wall time t = 0 + i T; drive's run folder the pose each command answered; the
+    robot's run folder the odometry it published and the command it held over each period."""
+    from ddtrack.ros.messages import quaternion_yaw, stamp_nanoseconds
+    from ddtrack.ros.reading import open_bag, topic_messages
+
+    with open_bag(drive / "drive.mcap") as reader:
+        odometry = [m for _, m in topic_messages(reader, "/odom", ("nav_msgs/msg/Odometry",), option="/odom")]
+        start = topic_messages(reader, "/cmd_vel", ("geometry_msgs/msg/Twist",), option="/cmd_vel")[0][0]
+    stamps = np.array([stamp_nanoseconds(m.header) for m in odometry])
+    poses = np.array(
+        [(m.pose.pose.position.x, m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation)) for m in odometry]
+    )
+    sent = pq.read_table(drive / "timeseries.parquet").to_pydict()
+    held = pq.read_table(live / "timeseries.parquet").to_pydict()
+    # the first odometry drive received is the robot's x_0: else drive's t = 0 would be a later period's
+    assert np.allclose(poses[0], [held[f"odom_{c}"][0] for c in ("x", "y", "theta")], rtol=0.0, atol=1e-12)
+    step = round(period * 1e9)
+    assert np.all((stamps - stamps[0]) % step == 0), "the robot stamps x_j with t_0 + j T"
+    answered = []  # j of each command: the odometry whose pose it answered, exactly as received
+    for x, y, theta in zip(sent["x"], sent["y"], sent["theta"], strict=True):
+        same = np.flatnonzero((poses[:, 0] == x) & (poses[:, 1] == y) & (np.abs(_wrapped(poses[:, 2] - theta)) < 1e-9))
+        assert same.size, f"no odometry received at ({x}, {y}, {theta})"
+        answered.append((stamps[same[0]] - stamps[0]) // step)
+    # which command the robot held over each period: drive's, in the order sent (zero until the first arrives)
+    values = list(zip(sent["v_cmd"], sent["omega_cmd"], strict=True))
+    to_answer, to_send, i = [], [], 0
+    for k, u in enumerate(zip(held["v_cmd"], held["omega_cmd"], strict=True)):
+        if not to_answer and u == (0.0, 0.0):
+            continue
+        i = values.index(u, i)  # ValueError: the robot held a command drive did not compute
+        to_answer.append(k - answered[i])
+        to_send.append(k - i)
+    return (start - stamps[0]) / 1e9, np.array(to_answer), np.array(to_send)

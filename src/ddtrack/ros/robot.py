@@ -152,6 +152,8 @@ class Robot:
         # compiled now, not in period 0: a realtime robot would start seconds late
         jax.block_until_ready(self._step(self.loop, self.x, jnp.zeros(2), 0, *self._draw(0)))
         self.sensed()
+        self.wheels()  # its first call compiles JAX's eager operations (0.4 s): period 0 would publish that late
+        self._angles, self._last = np.zeros(2), None
 
     def _draw(self, k: int) -> tuple[Any, Any]:
         """Period k's standard-normal disturbance and noise draws."""
@@ -220,7 +222,7 @@ class Options:
     timeout : float
         Lockstep: how long [s] to wait for each period's ``/cmd_vel``.
     start : int or None
-        The stamp of t = 0 [ns since the epoch]; None: 0, or the wall clock in realtime.
+        The stamp of t = 0 [ns since the epoch]; None: 0, or in realtime the wall clock as period 0 starts.
     twist_stamped : bool
         Take ``/cmd_vel`` as TwistStamped.
     domain : int or None
@@ -301,9 +303,10 @@ def run_robot(scenario: Scenario, options: Options, *, on_ready: Callable[[str],
         commands = node.subscriber("/cmd_vel", TWIST_STAMPED if stamped else TWIST, qos=DEFAULT_QOS)
         viewer = viewer_of(scenario, {}, frames)
         origin = options.start
-        if origin is None:
-            origin = time.time_ns() if options.mode == "realtime" else 0
-        fixed = [_transform(origin, frames.base, f.child, (f.x, f.y, f.z)) for f in viewer.fixed]
+        if origin is None and options.mode != "realtime":
+            origin = 0
+        fixed_stamp = time.time_ns() if origin is None else origin
+        fixed = [_transform(fixed_stamp, frames.base, f.child, (f.x, f.y, f.z)) for f in viewer.fixed]
         static.publish(message(TF, transforms=fixed))
         if options.mode == "lockstep":  # a driver that is not matched yet would miss period 0
             deadline = time.monotonic() + max(options.timeout, 10.0)
@@ -352,12 +355,15 @@ def _await_path(scenario: Scenario, node: Participant, topic: str, timeout: floa
     raise ConfigError("--path-topic", f"no {PATH_TYPE} on '{topic}' within {timeout:g} s", "")
 
 
-def _loop(robot: Robot, options: Options, origin: int, stop: list[bool], *topics: Any) -> tuple[str, int]:
-    """The periods of a live run: publish x_k, take the mode's command, advance; (how it ended, late periods)."""
+def _loop(robot: Robot, options: Options, origin: int | None, stop: list[bool], *topics: Any) -> tuple[str, int]:
+    """The periods of a live run: publish x_k, take the mode's command, advance; (how it ended, late periods).
+    ``origin`` None (realtime without ``--start``): t_0 is the wall clock as period 0 starts."""
     clock, odometry, transforms, joints, commands = topics
     frames, stamped, mode = options.frames, options.twist_stamped, options.mode
     v = omega = 0.0  # realtime and fast: zero until the first command
     wall = time.monotonic()
+    if origin is None:  # now, not before the setup: creating the publishers alone takes a few hundred ms
+        origin = time.time_ns()
     late = 0
     step_ns = round(robot.period * NANOSECONDS)
     while True:
