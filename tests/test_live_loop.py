@@ -1,7 +1,7 @@
 """``ddtrack drive`` against ``ddtrack robot`` (docs/ros.md): a ddtrack controller drives a ddtrack plant over DDS,
 each in its own process, on the loopback only. In lockstep the run scores as the same scenario run offline, drive's
 bag is a log ``identify`` fits, and the robot's run folder one ``export`` reads; on the wall clock it scores as the
-scenario run offline with the latency measured from what the two recorded, within the band that latency explains."""
+scenario run offline with the latency measured from what the two recorded, within 10 %."""
 
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from dds_helpers import loopback_environment
+
+from ddtrack.ros.drive import TICK_PHASE
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
@@ -96,16 +98,13 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     starts. This measures that latency from what the two processes recorded, runs the scenario offline with it
     added to the actuation delay, and compares the mean tracking errors.
 
-    The issue asked for 10 %; that model cannot give it, and the band is -30 % to +10 %. Both clocks tick in phase
-    (drive's t = 0 is x_0's arrival, 2 to 5 ms after its stamp), so whether drive's tick k sees x_k or still x_(k-1)
-    is a race, decided tick by tick: of the measured latency from x_j to the plant (a mean of 0.70 to 1.33 periods
-    over 14 runs, 4 of them beside a busy loop), 0.26 to 0.83 period is the odometry's age at drive's tick and the
-    rest the command's way to the robot's next period. An old measurement against the current reference puts the
-    robot ahead of the reference (offline, a measurement delay of one period: 4 mm ahead mid-run), a late command
-    behind it; mixed at random they cancel, which no single actuation delay reproduces. So the live run tracks
-    better than the offline run charged with the whole latency: 4 % to 24 % below it in those 14 runs (live 3.4 to
-    4.4 mm, offline 4.3 to 4.7 mm), never above. The band fails a drive whose reference runs a period or more
-    behind the robot's clock (94 ms behind: +71 % measured) or a latency the model does not know."""
+    Drive's ticks fall half a period after the odometry's arrivals (``TICK_PHASE``), so its tick k has x_k and its
+    command reaches the robot before period k + 1: one period from x_k to the plant, every period (199 of 199 in
+    each of three runs, one beside a busy loop), and the live mean e_tr equals the offline run's with one period more
+    of actuation delay to 12 digits (4.4240969704 mm both). The issue asked for 10 %, which this asserts: a late
+    tick now and then on a loaded machine changes the latency of a period, which the measured mean carries. Before
+    the half-period phase, ticks in phase with the odometry raced it (0 to 3 periods, live 4 % to 24 % below the
+    offline run), and a reference a period behind the robot's clock scored +71 %."""
     env = loopback_environment(20 + (os.getpid() * 7 + 5) % 200)
     live, offline, driven = tmp_path / "live", tmp_path / "offline", tmp_path / "drive"
     ddtrack = [sys.executable, "-m", "ddtrack"]
@@ -130,11 +129,10 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     for process, (_, err) in zip((robot, drive), outputs, strict=True):
         assert process.returncode == 0, err[-3000:]
     late, to_answer, to_send = _latencies(driven, live, PERIOD)
-    # drive's t = 0 is the robot's t_0 but for one publication and its delivery: well within a period
-    assert 0.0 < late < PERIOD / 2, late
-    # typically one period (drive's tick k answers x_k, the robot holds it from period k + 1); two when drive's tick
-    # came before x_k arrived (both clocks tick in phase, within milliseconds) or the command after the robot's
-    # period started; none when drive answered between the robot's publication and its take; more is a broken clock
+    # drive's t = 0 is the robot's t_0 but for one publication and its delivery, and its first tick half a period on
+    assert 0.0 < late - TICK_PHASE * PERIOD < PERIOD / 2, late
+    # one period (drive's tick k answers x_k, the robot holds it from period k + 1); two where a loaded machine
+    # delayed a tick past the robot's next period, none where it delayed the robot's take; more is a broken clock
     assert np.all((to_answer >= 0) & (to_answer <= 3)), _counts(to_answer)
     latency = float(np.mean(to_answer)) * PERIOD
     delay = round(DELAY + latency, 4)  # any delay is allowed: a fraction of a period splits it between two commands
@@ -152,11 +150,11 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     live_error, offline_error = measured["live"]["e_tr_mean"], measured["offline"]["e_tr_mean"]
     figures = (
         f"t = 0 {1e3 * late:.1f} ms after x_0; periods from x_j to the plant {_counts(to_answer)}, from drive's "
-        f"tick {_counts(to_send)}; latency {latency:.4f} s; e_tr mean live {live_error:.5g}, "
-        f"offline {offline_error:.5g}"
+        f"tick {_counts(to_send)}; latency {latency:.4f} s; e_tr mean live {live_error:.12g}, "
+        f"offline {offline_error:.12g}"
     )
     print(figures)
-    assert -0.30 * offline_error <= live_error - offline_error <= 0.10 * offline_error, figures
+    assert abs(live_error - offline_error) <= 0.10 * offline_error, figures
 
 
 def _counts(periods: np.ndarray) -> dict[int, int]:

@@ -46,6 +46,10 @@ TWIST_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
 POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
 #: [s] of the reference between two lines of the live tracking error on stderr
 REPORT_EVERY = 2.0
+#: where the wall clock's ticks fall in the period after the odometry's arrivals: half way, so that a robot
+#: publishing at the control rate has x_k delivered before tick k, and tick k's command back before its period k + 1
+#: starts, with half a period of margin on each side (ticks in phase with the odometry race it tick by tick)
+TICK_PHASE = 0.5
 
 
 @dataclass(frozen=True)
@@ -374,20 +378,24 @@ class Driver:
         return None
 
     def run_wall(self, stop: Stop) -> None:
-        """A period timer on the wall clock: each tick commands from the latest odometry, or stops the robot."""
+        """A period timer on the wall clock: each tick commands from the latest odometry, or stops the robot. Tick k
+        comes :data:`TICK_PHASE` of a period after t_k = k T (t = 0 the first odometry's arrival), and its reference
+        is taken at t_k, the time of the odometry it expects; its command is recorded when it is sent."""
         latest = self.first_odometry(stop)
         if latest is None:
             return
-        start = time.monotonic()
-        wall0 = time.time_ns()
-        received_at, k, woke = start, 0, start
+        arrived, wall0 = time.monotonic(), time.time_ns()
+        start = arrived + TICK_PHASE * self.period  # tick 0
+        if (pause := start - time.monotonic()) > 0:
+            time.sleep(pause)
+        received_at, k, woke = arrived, 0, time.monotonic()
         while stop.signal is None:
             t = k * self.period
             if t >= self.duration - 1e-9:
                 return
             if fresh := self.receive(self.odometry.take()):
                 latest, received_at = fresh[-1], time.monotonic()
-            nanoseconds = wall0 + round(t * NANOSECONDS)
+            nanoseconds = wall0 + round((t + TICK_PHASE * self.period) * NANOSECONDS)
             if time.monotonic() - received_at > self.options.odom_timeout:
                 self.summary.stale += 1
                 self.send(0.0, 0.0, nanoseconds)
