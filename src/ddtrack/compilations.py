@@ -181,7 +181,6 @@ def _exported_program(
     """The call of the program at ``path``, exported there first if absent or unreadable (written whole: a
     temporary file renamed); None where JAX cannot export it (no ``flatbuffers``; a host callback in the program)."""
     import jax
-    import jax.export  # a submodule JAX before 0.8 does not load with jax: without it, nothing would be exported
 
     try:
         program = jax.export.deserialize(bytearray(path.read_bytes()))

@@ -6,7 +6,6 @@ from collections.abc import Collection, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import jax
-import jax.export  # a submodule JAX before 0.8 does not load with jax
 import numpy as np
 from jax import Array
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import NamedTuple, Protocol
 
 import jax
-import jax.export  # a submodule JAX before 0.8 does not load with jax
 import jax.numpy as jnp
 from jax import Array
 
