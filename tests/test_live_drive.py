@@ -405,35 +405,42 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, monkeypatch):
     assert err.startswith("error: --path-topic:") and "NaN" in err
 
 
+def _in_lockstep(path: Path, duration: float, domain: int, fake: dict, args: list[str]) -> tuple[str, dict, int]:
+    """``ddtrack drive PATH --clock odom ARGS`` for ``duration`` seconds against the fake robot taking ``fake``'s
+    commands (effort or wheels), set at the reference's start; (drive's stderr, what the robot saw, its periods)."""
+    from ddtrack.scenario import load_scenario
+
+    scenario = load_scenario(path)
+    period, start = float(scenario.simulation.control_period), scenario.trajectory.build()(0.0)
+    steps = round(duration / period) + 1
+    pose = [float(start.x), float(start.y), float(start.theta)]
+    robot = _robot({"mode": "lockstep", "period": period, "steps": steps, "pose": pose} | fake, domain)
+    sets = ["--set", f"simulation.duration={duration}", "--set", f"simulation.metric_window=[0, {duration}]"]
+    drive = _drive([str(path), "--clock", "odom", *args, *sets], domain)
+    (code, _, err), (robot_code, out, robot_err) = _finish(drive, robot)
+    assert code == 0, err[-3000:]
+    assert robot_code == 0, robot_err[-3000:]
+    return err, json.loads(out), steps
+
+
 def test_effort_topic_drives_a_torque_law_in_lockstep(tmp_path):
     """paper_line's backstepping over computed torque, its wheel torques on a Float64MultiArray to a rigid-body
     robot of the scenario's nominal mass, inertia, wheel radius and half axle; joints given right first (the order)."""
     from ddtrack.scenario import load_scenario
 
-    scenario = load_scenario(PAPER_LINE)
-    duration, period, domain = 3.0, float(scenario.simulation.control_period), _domain(7)
-    reference = scenario.trajectory.build()
-    start = reference(0.0)
+    scenario, duration = load_scenario(PAPER_LINE), 3.0
     robot_params = scenario.robot
-    steps = round(duration / period) + 1
     effort = {"topic": "/wheels/commands", "joints": ["right", "left"]} | {
         "mass": robot_params.mass,
         "inertia": robot_params.inertia,
         "radius": robot_params.wheel_radius,
         "half_axle": robot_params.half_axle,
     }
-    pose = [float(start.x), float(start.y), float(start.theta)]
-    robot = _robot({"mode": "lockstep", "period": period, "steps": steps, "pose": pose, "effort": effort}, domain)
     bag = tmp_path / "line.mcap"
-    args = ["--clock", "odom", "--effort-topic", "/wheels/commands", "--joints", "right_wheel,left_wheel"]
-    sets = ["--set", f"simulation.duration={duration}", "--set", f"simulation.metric_window=[0, {duration}]"]
-    drive = _drive([str(PAPER_LINE), *args, *sets, "--bag", str(bag)], domain)
-    (code, _, err), (robot_code, out, robot_err) = _finish(drive, robot)
-    assert code == 0, err[-3000:]
-    assert robot_code == 0, robot_err[-3000:]
-    commands = steps - 1
-    assert f"stopped at the reference's end: {commands} commands" in err
-    seen = json.loads(out)
+    args = ["--effort-topic", "/wheels/commands", "--joints", "right_wheel,left_wheel", "--bag", str(bag)]
+    err, seen, steps = _in_lockstep(PAPER_LINE, duration, _domain(7), {"effort": effort}, args)
+    reference = scenario.trajectory.build()
+    assert f"stopped at the reference's end: {steps - 1} commands" in err
     assert len(seen["received"]) == steps and seen["received"][-1][1:] == [0.0, 0.0]  # then zero torques
     limit = float(scenario.robot.max_torque)
     assert all(abs(tau) <= limit for r in seen["received"] for tau in r[1:])
@@ -455,24 +462,14 @@ def test_wheel_velocity_topic_drives_a_velocity_law_in_lockstep(tmp_path):
     joints given left first (a TurtleBot's order, where the effort test gives right first)."""
     from ddtrack.scenario import load_scenario
 
-    scenario = load_scenario(FIGURE8)
-    duration, period, domain = 5.0, float(scenario.simulation.control_period), _domain(8)
-    reference = scenario.trajectory.build()
-    start = reference(0.0)
+    scenario, duration = load_scenario(FIGURE8), 5.0
     true, believed = scenario.plant_params(), scenario.robot
-    steps = round(duration / period) + 1
     wheels = {"topic": "/wheels/commands", "joints": ["left", "right"]}
     wheels |= {"radius": true.wheel_radius, "half_axle": true.half_axle}
-    pose = [float(start.x), float(start.y), float(start.theta)]
-    robot = _robot({"mode": "lockstep", "period": period, "steps": steps, "pose": pose, "wheels": wheels}, domain)
     out = tmp_path / "eight"
-    args = ["--clock", "odom", "--wheel-velocity-topic", "/wheels/commands", "--joints", "left_wheel,right_wheel"]
-    sets = ["--set", f"simulation.duration={duration}", "--set", f"simulation.metric_window=[0, {duration}]"]
-    drive = _drive([str(FIGURE8), *args, *sets, "--out", str(out)], domain)
-    (code, _, err), (robot_code, output, robot_err) = _finish(drive, robot)
-    assert code == 0, err[-3000:]
-    assert robot_code == 0, robot_err[-3000:]
-    seen = json.loads(output)
+    args = ["--wheel-velocity-topic", "/wheels/commands", "--joints", "left_wheel,right_wheel", "--out", str(out)]
+    _, seen, steps = _in_lockstep(FIGURE8, duration, _domain(8), {"wheels": wheels}, args)
+    reference = scenario.trajectory.build()
     assert len(seen["received"]) == steps and seen["received"][-1][1:] == [0.0, 0.0]  # then the wheels stop
     end = reference(duration)
     x, y, _ = seen["pose"]
@@ -482,6 +479,7 @@ def test_wheel_velocity_topic_drives_a_velocity_law_in_lockstep(tmp_path):
     # each array is W nu of the command the run folder records, on the wheels the law believes (left first)
     columns = pq.read_table(out / "timeseries.parquet").to_pydict()
     radius, half = float(believed.wheel_radius), float(believed.half_axle)
+    assert len(columns["v_cmd"]) == steps - 1  # every command but the final stop, which the robot received last
     for (_, left, right), v, omega in zip(seen["received"], columns["v_cmd"], columns["omega_cmd"], strict=False):
         assert right == pytest.approx((v + half * omega) / radius, rel=1e-12, abs=1e-12)
         assert left == pytest.approx((v - half * omega) / radius, rel=1e-12, abs=1e-12)

@@ -61,18 +61,7 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
             process.kill()
     for process, (_, err) in zip(started, outputs, strict=True):
         assert process.returncode == 0, err[-3000:]
-    subprocess.run(
-        [sys.executable, "-m", "ddtrack", "run", str(FIGURE8), *TIMING, "--out", str(offline)],
-        check=True,
-        capture_output=True,
-        timeout=TIMEOUT,
-    )
-    measured = {
-        name: json.loads((folder / "metrics.json").read_text())
-        for name, folder in [("live", live), ("offline", offline)]
-    }
-    assert measured["live"]["status"] == measured["offline"]["status"] == "ok"
-    live_error, offline_error = measured["live"]["e_tr_mean"], measured["offline"]["e_tr_mean"]
+    live_error, offline_error = _mean_errors(live, offline)
     assert abs(live_error - offline_error) <= 1e-6 * offline_error, (live_error, offline_error)
 
     # what drive recorded is a log identify fits (commands and odometry on one clock), and the robot's run folder
@@ -136,18 +125,7 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     assert np.all((to_answer >= 0) & (to_answer <= 3)), _counts(to_answer)
     latency = float(np.mean(to_answer)) * PERIOD
     delay = round(DELAY + latency, 4)  # any delay is allowed: a fraction of a period splits it between two commands
-    subprocess.run(
-        [*ddtrack, "run", str(FIGURE8), *TIMING, "--set", f"sensing.actuation_delay={delay}", "--out", str(offline)],
-        check=True,
-        capture_output=True,
-        timeout=TIMEOUT,
-    )
-    measured = {
-        name: json.loads((folder / "metrics.json").read_text())
-        for name, folder in [("live", live), ("offline", offline)]
-    }
-    assert measured["live"]["status"] == measured["offline"]["status"] == "ok"
-    live_error, offline_error = measured["live"]["e_tr_mean"], measured["offline"]["e_tr_mean"]
+    live_error, offline_error = _mean_errors(live, offline, "--set", f"sensing.actuation_delay={delay}")
     figures = (
         f"t = 0 {1e3 * late:.1f} ms after x_0; periods from x_j to the plant {_counts(to_answer)}, from drive's "
         f"tick {_counts(to_send)}; latency {latency:.4f} s; e_tr mean live {live_error:.12g}, "
@@ -155,6 +133,15 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     )
     print(figures)
     assert abs(live_error - offline_error) <= 0.10 * offline_error, figures
+
+
+def _mean_errors(live: Path, offline: Path, *options: str) -> tuple[float, float]:
+    """The live run's mean e_tr and that of the scenario run offline (with ``options``) into ``offline``; both ok."""
+    command = [sys.executable, "-m", "ddtrack", "run", str(FIGURE8), *TIMING, *options, "--out", str(offline)]
+    subprocess.run(command, check=True, capture_output=True, timeout=TIMEOUT)
+    measured = [json.loads((folder / "metrics.json").read_text()) for folder in (live, offline)]
+    assert [m["status"] for m in measured] == ["ok", "ok"]
+    return measured[0]["e_tr_mean"], measured[1]["e_tr_mean"]
 
 
 def _counts(periods: np.ndarray) -> dict[int, int]:

@@ -165,7 +165,7 @@ def drive(
     to a ros2_control velocity controller as wheel speeds. What it saw and sent is recorded as an MCAP bag, and
     scored as a run folder (the measured pose against the reference) that report and export read."""
     from ..ros.dds import dds_topic_name
-    from ..ros.drive import DriveOptions, refuse_torque_law
+    from ..ros.drive import DriveOptions, refuse_unfit_law
     from ..ros.drive import drive as drive_robot
     from ..ros.joint_groups import wheel_sides
     from ..scenario import load_scenario
@@ -175,7 +175,7 @@ def drive(
         if not frame.strip("/") or any(c.isspace() for c in frame):
             raise ConfigError(option, f"'{frame}' is not a frame id (give a name like odom or base_footprint)")
     spec = load_scenario(scenario, overrides=overrides)
-    refuse_torque_law(spec, effort_topic, wheel_velocity_topic)
+    refuse_unfit_law(spec, effort_topic, wheel_velocity_topic)
     joint_names = tuple(name.strip() for name in joints.split(","))
     wheel_sides(joint_names)
     for option, topic in (

@@ -152,8 +152,8 @@ def speed_limits(scenario: Any) -> tuple[float | None, float | None]:
     return (top_v if v is None else float(v)), (top_w if w is None else float(w))
 
 
-def refuse_torque_law(scenario: Any, effort_topic: str | None = None, wheel_velocity_topic: str | None = None) -> None:
-    """Refuse a law whose output does not fit the topic: wheel torques reach a robot only through a ros2_control
+def refuse_unfit_law(scenario: Any, effort_topic: str | None = None, wheel_velocity_topic: str | None = None) -> None:
+    """Refuse a law whose output does not fit the command topic: wheel torques reach a robot only through a ros2_control
     effort controller (``--effort-topic``), a velocity law's (v, omega) are no efforts, and wheel speeds
     (``--wheel-velocity-topic``) come from a velocity law only."""
     from ..scenario import controller_output
@@ -460,7 +460,7 @@ def drive(scenario: Any, options: DriveOptions, bag: Path, *, log: Callable[[str
         Commands sent, tracking errors, missed periods, jitter and how it ended.
     """
     say = log if log is not None else (lambda line: print(line, file=sys.stderr, flush=True))
-    refuse_torque_law(scenario, options.effort_topic, options.wheel_velocity_topic)
+    refuse_unfit_law(scenario, options.effort_topic, options.wheel_velocity_topic)
     with Stop() as stop, Participant(options.domain) as node:
         if options.path_topic is not None:
             scenario = _await_path(scenario, options, node, stop)

@@ -17,10 +17,11 @@ from ..layout import BODY, POSTURE_ERROR
 from ..runner import run_metrics
 from ..scenario import Scenario
 from ..sim.result import finished_columns
+from ..studies.recorded import MEASURED
 
 #: the warning every measured run carries
 MEASURED_POSE = {
-    "code": "measured_pose",
+    "code": MEASURED,
     "message": "the pose is the robot's odometry as ddtrack drive received it, not ground truth: its errors are "
     "the tracking errors the robot believed it had (an odometry that drifts looks on track)",
 }

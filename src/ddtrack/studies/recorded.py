@@ -20,7 +20,8 @@ from ..errors import ConfigError
 from ..outdir import MARKER, read_marker
 from ..scenario import Scenario, load_scenario
 
-#: the warning of a ``ddtrack drive`` folder (:data:`ddtrack.ros.measured.MEASURED_POSE`): its pose is the odometry's
+#: the warning code of a ``ddtrack drive`` folder (:data:`ddtrack.ros.measured.MEASURED_POSE`): its pose is the
+#: odometry's, which bench refuses to rank
 MEASURED = "measured_pose"
 RUN_FILES = ("scenario.toml", "metrics.json")  #: what a run folder holds, besides its marker
 _WRITERS = "give a folder written by `ddtrack run` or `ddtrack robot`"
@@ -105,9 +106,10 @@ def read_recorded(folder: Path) -> tuple[Scenario, RecordedRun]:
             "a simulation scores",
             "rank a `ddtrack robot` run instead: its plant knows the true pose",
         )
-    cut = (metrics.get("driven_by") or {}).get("ended") if isinstance(metrics.get("driven_by"), Mapping) else None
-    if cut in CUT_SHORT:  # its metrics cover part of the reference, which no whole run would be compared with
-        periods = metrics["driven_by"].get("periods")
+    driver = metrics.get("driven_by")
+    driver = driver if isinstance(driver, Mapping) else {}
+    if (cut := driver.get("ended")) in CUT_SHORT:  # its metrics cover part of the reference: no whole run's peer
+        periods = driver.get("periods")
         raise _refused(
             folder,
             f"the run was cut short ({CUT_SHORT[cut]}, after {periods} periods): its metrics cover only part of the "
