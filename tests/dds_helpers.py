@@ -14,6 +14,18 @@ LOOPBACK = (
 )
 
 
+#: DDS domains of each pytest worker: a block of its own (gw0 20-69, gw1 70-119, ...), so that tests running at once
+#: in two workers never hear each other (domains derived from process ids once collided); a worker runs its tests
+#: one at a time, and each test file takes its own offsets in the block
+DOMAINS_PER_WORKER = 50
+
+
+def worker_domain(offset: int) -> int:
+    """The DDS domain ``offset`` of this pytest worker's block (:data:`DOMAINS_PER_WORKER`); 20 to 219."""
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)
+    return 20 + (worker * DOMAINS_PER_WORKER + offset % DOMAINS_PER_WORKER) % 200
+
+
 def loopback_environment(domain: int) -> dict[str, str]:
     """The environment of a process a test starts: the loopback configuration and the DDS ``domain``."""
     return dict(os.environ, CYCLONEDDS_URI=LOOPBACK, ROS_DOMAIN_ID=str(domain))

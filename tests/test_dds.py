@@ -19,14 +19,14 @@ import textwrap
 
 import numpy as np
 import pytest
-from dds_helpers import LOOPBACK, ROS2_TYPES
+from dds_helpers import LOOPBACK, ROS2_TYPES, worker_domain
 from rosbags.interfaces import Nodetype
 
 from ddtrack.errors import ConfigError, RunError
 from ddtrack.ros import dds, wire
 from ddtrack.ros.messages import header, message, planar_pose, stamp, typestore
 
-DOMAIN = os.getpid() % 200 + 20  # a pytest worker's own domain (pytest -n: one file runs in one worker)
+DOMAIN = worker_domain(0)  # this worker's block's first: this file's
 PROCESS_TIMEOUT = 25  # [s] a node that found no peer gives up after 15 s; this only stops a hung process
 
 
@@ -255,7 +255,7 @@ def test_traffic_stays_on_the_loopback(tmp_path, monkeypatch):
     trace = tmp_path / "cyclonedds.log"
     tracing = f"<Tracing><Category>config</Category><OutputFile>{trace}</OutputFile></Tracing>"
     monkeypatch.setenv("CYCLONEDDS_URI", f"{LOOPBACK},<CycloneDDS><Domain>{tracing}</Domain></CycloneDDS>")
-    with dds.Participant(domain=(DOMAIN + 1) % 200 + 20):  # a domain of its own: its configuration is read anew
+    with dds.Participant(domain=worker_domain(13)):  # a domain of its own: its configuration is read anew
         pass
     selected = [line for line in trace.read_text().splitlines() if "selected interfaces:" in line]
     assert len(selected) == 1 and selected[0].split("selected interfaces:")[1].split()[0] == "lo", selected

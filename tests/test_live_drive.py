@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from dds_helpers import LOOPBACK, ROS2_TYPES
+from dds_helpers import LOOPBACK, ROS2_TYPES, worker_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
@@ -150,7 +150,7 @@ FAKE_ROBOT = ROS2_TYPES + textwrap.dedent(
 
 def _domain(offset: int) -> int:
     """A domain of this test's own: parallel pytest workers and the tests of this file do not hear each other."""
-    return 20 + (os.getpid() * 5 + offset) % 200
+    return worker_domain(20 + offset)  # 20 to 29: this file's
 
 
 def _environment(domain: int) -> dict[str, str]:

@@ -6,7 +6,6 @@ scenario run offline with the latency measured from what the two recorded, withi
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from dds_helpers import loopback_environment
+from dds_helpers import loopback_environment, worker_domain
 
 from ddtrack.ros.drive import TICK_PHASE
 
@@ -34,7 +33,7 @@ def test_drive_against_robot_tracks_as_the_offline_run(tmp_path):
     simulator (a latency of no period), so the live run's mean tracking error is the offline run's: the issue asked
     for 10 %; the transport's rounding (poses through quaternions, stamps in nanoseconds) is all that differs, and
     they agree to 1e-6 (2e-14 measured), which this asserts."""
-    env = loopback_environment(20 + (os.getpid() * 7 + 3) % 200)
+    env = loopback_environment(worker_domain(40))
     live, offline = tmp_path / "live", tmp_path / "offline"
     commands = [
         [sys.executable, "-m", "ddtrack", "robot", str(FIGURE8), "--mode", "lockstep", *TIMING, "--out", str(live)],
@@ -94,7 +93,7 @@ def test_drive_against_robot_in_realtime_tracks_as_the_offline_run_with_the_meas
     tick now and then on a loaded machine changes the latency of a period, which the measured mean carries. Before
     the half-period phase, ticks in phase with the odometry raced it (0 to 3 periods, live 4 % to 24 % below the
     offline run), and a reference a period behind the robot's clock scored +71 %."""
-    env = loopback_environment(20 + (os.getpid() * 7 + 5) % 200)
+    env = loopback_environment(worker_domain(41))
     live, offline, driven = tmp_path / "live", tmp_path / "offline", tmp_path / "drive"
     ddtrack = [sys.executable, "-m", "ddtrack"]
     pipes = {"env": env, "stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}

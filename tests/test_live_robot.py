@@ -7,7 +7,6 @@ Each test starts its processes on the loopback only, in a DDS domain of its own.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -18,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from dds_helpers import ROS2_TYPES, loopback_environment
+from dds_helpers import ROS2_TYPES, loopback_environment, worker_domain
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE8 = ROOT / "scenarios" / "burger_cmd_vel_figure8.toml"
@@ -104,7 +103,7 @@ DRIVER = ROS2_TYPES + textwrap.dedent(
 
 def _domain(offset: int) -> int:
     """A DDS domain of this test's own (test processes run in parallel)."""
-    return (os.getpid() + 37 * offset) % 200 + 20
+    return worker_domain(offset)  # 1 to 12: this file's
 
 
 def _drive(tmp_path: Path, name: str, offset: int, pattern: str = "constant", *options: str, code: int = 0):
